@@ -1,0 +1,66 @@
+"""Settings of one reconstruction: one dataclass shared by the CLI, Blender, batch and benchmark."""
+
+from dataclasses import asdict, dataclass, fields
+
+from .errors import InputError
+
+RADIUS_MODES = ("fixed", "curvature", "learned")
+DEVICES = ("auto", "cpu", "cuda")
+
+
+@dataclass
+class ReconstructSettings:
+    """How to reconstruct. All lengths are in the unit frame (bounding box longest side 1).
+
+    radius_mode: how the backbone's ball radius is chosen per query: ``fixed`` (one radius, as
+        LoSF-UDF), ``curvature`` (smaller where the surface bends, as GeoLA) or ``learned``
+        (the selector network predicts it).
+    radius: the ball radius of ``fixed`` mode.
+    parent_radius: R, the radius of the parent ball the curvature and learned modes look at.
+    rho_min, rho_max: the per-query radius stays in [rho_min * R, rho_max * R].
+    resolution: grid cells along the longest side of the bounding box.
+    device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
+    seed: every random choice is drawn from this seed, so results repeat on CPU.
+    min_component_faces: drop output pieces with fewer faces (0 keeps everything).
+    """
+
+    radius_mode: str = "fixed"
+    radius: float = 0.018
+    parent_radius: float = 0.024
+    rho_min: float = 0.5
+    rho_max: float = 1.0
+    resolution: int = 256
+    device: str = "auto"
+    seed: int = 0
+    min_component_faces: int = 0
+
+    def validate(self) -> "ReconstructSettings":
+        """Raise :class:`InputError` with a clear message when a setting is out of range."""
+        if self.radius_mode not in RADIUS_MODES:
+            raise InputError(f"radius mode must be one of {', '.join(RADIUS_MODES)}, "
+                             f"not {self.radius_mode!r}")
+        if self.device not in DEVICES:
+            raise InputError(f"device must be one of {', '.join(DEVICES)}, not {self.device!r}")
+        if not 0.001 <= self.radius <= 0.2:
+            raise InputError(f"radius {self.radius} is outside [0.001, 0.2] (unit frame)")
+        if not 0.001 <= self.parent_radius <= 0.2:
+            raise InputError(f"parent radius {self.parent_radius} is outside [0.001, 0.2]")
+        if not 0.05 <= self.rho_min <= self.rho_max <= 1.0:
+            raise InputError(f"need 0.05 <= rho_min <= rho_max <= 1, got "
+                             f"rho_min={self.rho_min}, rho_max={self.rho_max}")
+        if not 32 <= self.resolution <= 1024:
+            raise InputError(f"resolution {self.resolution} is outside [32, 1024]")
+        if self.min_component_faces < 0:
+            raise InputError("min_component_faces must be >= 0")
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> "ReconstructSettings":
+        known = {f.name for f in fields(cls)}
+        unknown = set(values) - known
+        if unknown:
+            raise InputError(f"unknown settings: {', '.join(sorted(unknown))}")
+        return cls(**values).validate()
