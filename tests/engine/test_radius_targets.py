@@ -1,0 +1,52 @@
+import numpy as np
+import pytest
+
+from engine.training.radius_targets import (CANDIDATE_RADII, loss_weights, parabola_targets,
+                                            selector_loss)
+
+
+def test_candidate_radii_are_the_papers_seven():
+    np.testing.assert_allclose(CANDIDATE_RADII, [0.012, 0.014, 0.016, 0.018, 0.020, 0.022, 0.024])
+
+
+@pytest.mark.parametrize("vertex", [0.0151, 0.017, 0.0183, 0.0209, 0.0222])
+def test_parabola_recovers_a_known_vertex_exactly(vertex):
+    errors = 3.0 * (CANDIDATE_RADII - vertex) ** 2 + 0.01
+    assert parabola_targets(errors[None])[0] == pytest.approx(vertex, abs=1e-12)
+
+
+def test_minimum_at_either_end_falls_back_to_the_grid():
+    rising = 0.01 + CANDIDATE_RADII  # best at the smallest radius
+    falling = 0.05 - CANDIDATE_RADII  # best at the largest radius
+    targets = parabola_targets(np.stack([rising, falling]))
+    np.testing.assert_allclose(targets, [0.012, 0.024])
+
+
+def test_non_convex_or_flat_neighbourhood_falls_back_to_the_grid_minimum():
+    flat = np.full(7, 0.02)
+    kink = np.array([0.05, 0.04, 0.03, 0.01, 0.01, 0.03, 0.05])  # tie: argmin is the first
+    targets = parabola_targets(np.stack([flat, kink]))
+    assert targets[0] == pytest.approx(0.012)
+    # the tie at indices 3 and 4 is convex around index 3: vertex half-way towards index 4
+    assert 0.018 <= targets[1] <= 0.019
+
+
+def test_targets_stay_within_half_a_step_of_the_grid_minimum():
+    rng = np.random.default_rng(0)
+    errors = rng.random((5000, 7))
+    targets = parabola_targets(errors)
+    grid_best = CANDIDATE_RADII[np.argmin(errors, axis=1)]
+    assert np.all(np.abs(targets - grid_best) <= 0.001 + 1e-12)
+    assert targets.min() >= 0.012 and targets.max() <= 0.024
+
+
+def test_loss_weight_is_zero_where_the_error_curve_is_flat():
+    errors = np.stack([np.full(7, 0.3), np.linspace(0.1, 0.4, 7)])
+    np.testing.assert_allclose(loss_weights(errors), [0.0, 0.3])
+    # a flat query contributes nothing to the loss however wrong the prediction is
+    assert selector_loss(np.array([0.024]), np.array([0.012]), np.array([0.0]), 0.012, 0.024) == 0
+
+
+def test_selector_loss_is_normalised_by_the_radius_span():
+    loss = selector_loss(np.array([0.018]), np.array([0.012]), np.array([2.0]), 0.012, 0.024)
+    assert loss == pytest.approx(2.0 * 0.006 / 0.012)
