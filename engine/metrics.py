@@ -15,11 +15,12 @@ The sample count sets a floor: a mesh scored against itself does not get 0 (at 1
 CGAL bunny gives CD-L1 ×10² ≈ 0.24), so always state the count.
 """
 
-from typing import Dict, Optional, Sequence
+from typing import Dict, Sequence
 
 import numpy as np
 
 from .errors import InputError
+from .frame import UnitFrame
 from .geometry import Mesh
 from .sampling import face_areas_and_normals, sample_surface
 
@@ -97,9 +98,9 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
     samples : number of area-weighted surface samples drawn on each mesh
     seed : seed of the sampling; pred and gt draw from separate streams
         ``default_rng([seed, 0])`` and ``default_rng([seed, 1])``
-    frame : ``engine.frame.UnitFrame`` or None
-        Frame both meshes are scored in; None uses ``UnitFrame.from_points(gt.vertices)``
-        (ground-truth bbox centred at 0, longest side 1).
+    frame : UnitFrame or None
+        Frame both meshes are scored in; None uses the ground truth's vertices' frame
+        (bbox centred at 0, longest side 1).
 
     Returns
     -------
@@ -118,9 +119,8 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
         raise InputError(f"the sample count must be at least 1, got {samples}")
     if _surface_area(gt) <= 0:
         raise InputError("the ground-truth mesh has no faces with area; cannot score against it")
-    if frame is None:
-        from .frame import UnitFrame
-        frame = UnitFrame.from_points(np.asarray(gt.vertices, dtype=np.float64))
+    if frame is None:  # 3 distinct points: a single triangle is a valid ground truth
+        frame = UnitFrame.from_points(np.asarray(gt.vertices, dtype=np.float64), min_points=3)
 
     pred_faces = int(np.asarray(pred.faces).reshape(-1, 3).shape[0])
     info = {"empty": False, "samples": int(samples), "pred_faces": pred_faces}

@@ -19,15 +19,13 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    """Read both meshes, score them in the ground truth's unit frame, print the JSON."""
-    from ..frame import UnitFrame
+    """Read both meshes, score them in the GT's unit frame, print the JSON; return 0."""
     from ..io import read_mesh
     from ..metrics import evaluate
 
     pred = read_mesh(args.pred)
     gt = read_mesh(args.gt)
-    frame = UnitFrame.from_points(gt.vertices)
-    result = evaluate(pred, gt, samples=args.samples, seed=args.seed, frame=frame)
+    result = evaluate(pred, gt, samples=args.samples, seed=args.seed)  # in the GT's unit frame
     strict = {key: (None if isinstance(value, float) and not math.isfinite(value) else value)
               for key, value in result.items()}
     print(json.dumps(strict, allow_nan=False))

@@ -17,7 +17,7 @@ BUNNY = Path("/work/shared/data/real/cgal/bunny00.off")
 
 
 def grid_square(cells: int, side: float = 1.0, origin=(0.0, 0.0, 0.0)) -> Mesh:
-    """A flat square in the z = origin[2] plane, ``cells`` x ``cells`` quads split in 2 triangles."""
+    """A flat square in the plane z = origin[2]: ``cells`` x ``cells`` quads, 2 triangles each."""
     ticks = np.linspace(0.0, side, cells + 1)
     x, y = np.meshgrid(ticks, ticks, indexing="ij")
     vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1) + np.asarray(origin)
