@@ -1,0 +1,160 @@
+"""The unit frame: the points' bounding box centred at the origin, longest side 1.
+
+Every radius, grid spacing and metric threshold of the engine is measured in this frame, so a
+reconstruction behaves the same whatever the input's units. The frame also refuses clouds no
+surface can be built from, with a message that says what to do.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+MIN_POINTS = 10
+"""Fewest distinct points accepted; fewer cannot describe a surface."""
+
+_LINE_TOLERANCE = 1e-9
+"""A cloud is a line when every point lies within this fraction of its extent from one line."""
+
+_UNIQUE_SAMPLE = 4096
+"""Distinct points are first counted in this many leading points; usually that settles it."""
+
+
+@dataclass(frozen=True, eq=False)
+class UnitFrame:
+    """A similarity transform from input units to the unit frame: ``unit = (x - center) / scale``.
+
+    Attributes
+    ----------
+    center : (3,) float64, read-only
+        The centre of the points' axis-aligned bounding box, in input units.
+    scale : float
+        The bounding box's longest side, in input units (> 0).
+    """
+
+    center: np.ndarray
+    scale: float
+
+    def __post_init__(self):
+        center = np.array(self.center, dtype=np.float64).reshape(3)
+        center.setflags(write=False)
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "scale", float(self.scale))
+        if not (np.isfinite(self.scale) and self.scale > 0 and np.isfinite(center).all()):
+            raise InputError(f"a unit frame needs a finite centre and a positive scale, got "
+                             f"centre {center.tolist()} and scale {self.scale}")
+
+    @classmethod
+    def from_points(cls, points, min_points: int = MIN_POINTS) -> "UnitFrame":
+        """The frame of a cloud, after :func:`validate_points` accepts it.
+
+        Parameters
+        ----------
+        points : (N, 3) array-like of numbers, input units
+        min_points : fewest distinct points accepted
+
+        Returns
+        -------
+        UnitFrame
+            centre = bounding-box centre, scale = bounding box's longest side.
+        """
+        points = validate_points(points, min_points)
+        low, high = points.min(axis=0), points.max(axis=0)
+        return cls(center=(low + high) / 2.0, scale=float(np.max(high - low)))
+
+    def to_unit(self, x) -> np.ndarray:
+        """Input units -> unit frame: ``(x - center) / scale``; x: (..., 3) -> (..., 3) float64."""
+        return (np.asarray(x, dtype=np.float64) - self.center) / self.scale
+
+    def from_unit(self, x) -> np.ndarray:
+        """Unit frame -> input units: ``x * scale + center``, the inverse of :meth:`to_unit`
+        to float64 rounding; x: (..., 3) -> (..., 3) float64."""
+        return np.asarray(x, dtype=np.float64) * self.scale + self.center
+
+
+def validate_points(points, min_points: int = MIN_POINTS) -> np.ndarray:
+    """Check that a surface can be reconstructed from a cloud; refuse it with a clear message.
+
+    Refused: anything that is not an (N, 3) array of numbers; NaN or infinite coordinates;
+    fewer than ``min_points`` points, or fewer than ``min_points`` distinct ones (duplicates
+    are allowed otherwise); all points at one position; all points on one line.
+
+    Parameters
+    ----------
+    points : (N, 3) array-like of numbers, any units
+    min_points : fewest distinct points accepted (default :data:`MIN_POINTS`)
+
+    Returns
+    -------
+    (N, 3) float64
+        The same points as a float64 array (not a copy when already one).
+
+    Raises
+    ------
+    InputError
+        Saying what is wrong and what to do.
+    """
+    try:
+        array = np.asarray(points)
+    except (ValueError, TypeError):
+        array = None
+    if array is None or array.dtype.kind not in "iuf":
+        raise InputError("the points must be an (N, 3) array of numbers; got "
+                         f"{type(points).__name__}" + ("" if array is None else
+                                                       f" of {array.dtype}"))
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise InputError(f"the points must be an (N, 3) array (x, y, z per row); got shape "
+                         f"{array.shape}")
+    array = array.astype(np.float64, copy=False)
+    count = len(array)
+    if count == 0:
+        raise InputError("the point cloud is empty; choose an object or file that has points")
+    if count < min_points:
+        raise InputError(f"only {count} points; a surface needs at least {min_points}: "
+                         f"add more points or choose a denser cloud")
+    finite = np.isfinite(array).all(axis=1)
+    if not finite.all():
+        bad = count - int(finite.sum())
+        raise InputError(f"{bad} of {count} points have NaN or infinite coordinates; remove "
+                         f"them (or fix the export that wrote them) and try again")
+    low, high = array.min(axis=0), array.max(axis=0)
+    extent = float(np.max(high - low))
+    if extent == 0.0:
+        raise InputError(f"all {count} points are at the same position {low.tolist()}; "
+                         f"a surface needs points spread over an area")
+    distinct = _count_distinct(array, min_points)
+    if distinct < min_points:
+        raise InputError(f"only {distinct} distinct points ({count} with duplicates); a "
+                         f"surface needs at least {min_points}: add more points")
+    if _on_a_line(array, extent):
+        raise InputError("all points lie on a line; a surface needs a 2-D spread: check "
+                         "that the right object or file was chosen")
+    return array
+
+
+def _count_distinct(points: np.ndarray, enough: int) -> int:
+    """Number of distinct rows, or any number >= ``enough`` once that many are certain.
+
+    Counting distinct rows of a large cloud means sorting it (seconds for millions); the
+    distinct rows among a leading sample are a lower bound, which almost always settles it.
+    """
+    sample = points[:_UNIQUE_SAMPLE]
+    distinct = len(np.unique(sample, axis=0))
+    if distinct >= enough or len(sample) == len(points):
+        return distinct
+    return len(np.unique(points, axis=0))
+
+
+def _on_a_line(points: np.ndarray, extent: float) -> bool:
+    """True when every point lies within ``_LINE_TOLERANCE * extent`` of one line.
+
+    The line tested is the least-squares one: through the centroid along the principal axis
+    (the largest eigenvector of the 3 x 3 scatter matrix).
+    """
+    centred = points - points.mean(axis=0)
+    _, vectors = np.linalg.eigh(centred.T @ centred)
+    axis = vectors[:, -1]
+    off_line = centred - np.outer(centred @ axis, axis)
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", off_line, off_line)))) <= (
+        _LINE_TOLERANCE * extent)

@@ -1,0 +1,915 @@
+"""Read point clouds and meshes from files; write meshes.
+
+Reading: PLY (ascii and binary, either byte order), OBJ, OFF (with the C/N/ST variants), XYZ,
+PTS and TXT (columns of numbers), NPY, NPZ, LAS and LAZ. Writing: PLY (binary little endian),
+OBJ and OFF. The format is chosen by the file's extension.
+
+Every problem with a file (missing, unsupported, corrupt, truncated, no points) raises
+:class:`InputError` with one message that names the file and says what is wrong.
+Parsing is vectorised: binary PLY bodies are viewed with numpy structured dtypes, text bodies
+are split into one token array and converted in one call.
+"""
+
+import os
+import re
+import struct
+import zipfile
+import zlib
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from .errors import InputError
+from .geometry import Mesh, PointCloud
+
+READ_FORMATS = ("PLY", "OBJ", "OFF", "XYZ", "PTS", "TXT", "NPY", "NPZ", "LAS", "LAZ")
+WRITE_FORMATS = ("PLY", "OBJ", "OFF")
+
+
+class _BadFile(Exception):
+    """A problem inside a file; :func:`read_mesh` prefixes the file name and raises InputError."""
+
+
+def read_point_cloud(path) -> PointCloud:
+    """Read the points of a file (a mesh file gives its vertices).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file whose extension is one of ``READ_FORMATS`` (case-insensitive).
+
+    Returns
+    -------
+    PointCloud
+        points (N, 3) float64 in the file's units; normals (N, 3) float64 or None;
+        colors (N, 3) or (N, 4) float32 in [0, 1] or None.
+
+    Raises
+    ------
+    InputError
+        The file is missing, unsupported, unreadable, corrupt, truncated or has no points.
+    """
+    return read_mesh(path).as_point_cloud()
+
+
+def read_mesh(path) -> Mesh:
+    """Read a mesh (or a points-only file, which gives a mesh without faces).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file whose extension is one of ``READ_FORMATS`` (case-insensitive).
+
+    Returns
+    -------
+    Mesh
+        vertices (V, 3) float64; faces (F, 3) int64, polygons fan-triangulated, (0, 3) when
+        the file has none; normals (V, 3) float64 or None; colors (V, 3|4) float32 in [0, 1]
+        or None.
+
+    Raises
+    ------
+    InputError
+        The file is missing, unsupported, unreadable, corrupt, truncated or has no points.
+    """
+    path = os.fspath(path)
+    name = os.path.basename(path) or path
+    extension = os.path.splitext(path)[1].lower().lstrip(".")
+    if not os.path.exists(path):
+        raise InputError(f"{name}: file not found (looked for {os.path.abspath(path)})")
+    if os.path.isdir(path):
+        raise InputError(f"{name}: is a folder, not a file")
+    reader = _READERS.get(extension)
+    if reader is None:
+        raise InputError(f"{name}: unsupported format; use {', '.join(READ_FORMATS[:-1])} "
+                         f"or {READ_FORMATS[-1]}")
+    try:
+        mesh = reader(path)
+        return _checked(mesh)
+    except _BadFile as error:
+        raise InputError(f"{name}: {error}") from None
+    except OSError as error:
+        raise InputError(f"{name}: cannot be read ({error.strerror or error})") from None
+    except (ValueError, IndexError, KeyError, TypeError, OverflowError, EOFError) as error:
+        # Anything the format checks above did not foresee still reaches the user as one line.
+        raise InputError(f"{name}: not a valid {extension.upper()} file ({error})") from None
+
+
+def write_mesh(path, mesh: Mesh) -> None:
+    """Write a mesh as PLY (binary little endian), OBJ or OFF, chosen by the extension.
+
+    Vertices keep float64 precision (PLY ``double``; 17 significant digits in text formats),
+    normals and colours are written when present; PLY stores colours as uchar, OBJ and OFF as
+    floats in [0, 1].
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination ending in .ply, .obj or .off; an existing file is replaced.
+    mesh : Mesh
+        vertices (V, 3), faces (F, 3) (may be empty), optional normals (V, 3) and colours
+        (V, 3|4) in [0, 1].
+
+    Raises
+    ------
+    InputError
+        Unsupported extension, or the file cannot be written.
+    """
+    path = os.fspath(path)
+    name = os.path.basename(path) or path
+    extension = os.path.splitext(path)[1].lower().lstrip(".")
+    writer = _WRITERS.get(extension)
+    if writer is None:
+        raise InputError(f"{name}: cannot write this format; use "
+                         f"{', '.join(WRITE_FORMATS[:-1])} or {WRITE_FORMATS[-1]}")
+    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    normals = None if mesh.normals is None else np.asarray(mesh.normals, np.float64).reshape(-1, 3)
+    colors = None
+    if mesh.colors is not None:
+        colors = np.clip(np.asarray(mesh.colors, dtype=np.float64), 0.0, 1.0)
+        colors = colors.reshape(len(colors), -1)
+    try:
+        with open(path, "wb") as file:
+            writer(file, vertices, faces, normals, colors)
+    except OSError as error:
+        raise InputError(f"{name}: cannot be written ({error.strerror or error})") from None
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+
+def _checked(mesh: Mesh) -> Mesh:
+    """Common checks and dtypes for every reader's result."""
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    if len(vertices) == 0:
+        raise _BadFile("the file contains no points")
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+        bad = faces[(faces < 0) | (faces >= len(vertices))][0]
+        raise _BadFile(f"a face refers to vertex {bad}, but there are only {len(vertices)} "
+                       f"vertices (numbered from 0)")
+    normals = mesh.normals
+    if normals is not None:
+        normals = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    colors = mesh.colors
+    if colors is not None:
+        colors = np.clip(np.asarray(colors, dtype=np.float32), 0.0, 1.0)
+        colors = np.ascontiguousarray(colors.reshape(len(colors), -1))
+    return Mesh(vertices, faces, normals, colors)
+
+
+def _fan(polygons: np.ndarray) -> np.ndarray:
+    """Fan-triangulate polygons that all have the same vertex count.
+
+    polygons : (P, n) int -> (P * (n - 2), 3) int64; empty for n < 3 (points and edges).
+    """
+    polygons = np.asarray(polygons, dtype=np.int64)
+    count = polygons.shape[1]
+    if count < 3:
+        return np.zeros((0, 3), np.int64)
+    fans = [np.stack([polygons[:, 0], polygons[:, i], polygons[:, i + 1]], axis=1)
+            for i in range(1, count - 1)]
+    # Keep each polygon's triangles together, in order.
+    return np.stack(fans, axis=1).reshape(-1, 3)
+
+
+def _fan_lists(polygons: List[List[int]]) -> np.ndarray:
+    """Fan-triangulate polygons of mixed sizes (given as Python lists) -> (T, 3) int64."""
+    triangles = [(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)]
+    return np.array(triangles, dtype=np.int64).reshape(-1, 3)
+
+
+def _scaled_colors(values: np.ndarray, integer_max: Optional[int]) -> np.ndarray:
+    """Colour channels -> float32 in [0, 1]; integer storage is divided by its full scale."""
+    values = np.asarray(values, dtype=np.float64)
+    if integer_max:
+        values = values / integer_max
+    return np.clip(values, 0.0, 1.0).astype(np.float32)
+
+
+def _text_colors(values: np.ndarray) -> np.ndarray:
+    """Colours written as text: 0..255 when any channel exceeds 1, otherwise floats in [0, 1]."""
+    return _scaled_colors(values, 255 if values.size and values.max() > 1.0 else None)
+
+
+def _numbers(tokens: List[bytes], what: str) -> np.ndarray:
+    """Convert text tokens to float64 in one call; name the first bad token on failure."""
+    try:
+        return np.array(tokens, dtype=np.float64)
+    except ValueError:
+        for token in tokens:
+            try:
+                float(token)
+            except ValueError:
+                text = token.decode("utf-8", "replace")[:40]
+                raise _BadFile(f"{what}: {text!r} is not a number") from None
+        raise
+
+
+def _table(rows: List[bytes], what: str) -> np.ndarray:
+    """Rows of whitespace-separated numbers -> (R, C) float64 (C = the shortest row's length).
+
+    One token split and one conversion when every row has the same length; rows of mixed
+    length (e.g. OBJ vertices with and without colour) are cut to the shortest.
+    """
+    if not rows:
+        return np.zeros((0, 0))
+    width = len(rows[0].split())
+    tokens = b" ".join(rows).split()
+    if len(tokens) == width * len(rows):
+        return _numbers(tokens, what).reshape(len(rows), width)
+    split = [row.split() for row in rows]
+    width = min(len(row) for row in split)
+    return _numbers([t for row in split for t in row[:width]], what).reshape(len(rows), width)
+
+
+def _text_lines(data: bytes) -> List[bytes]:
+    """Non-empty, stripped lines with ``#`` comments removed."""
+    if b"#" in data:
+        data = re.sub(rb"#[^\r\n]*", b"", data)
+    return [line for line in (raw.strip() for raw in data.splitlines()) if line]
+
+
+# --------------------------------------------------------------------------- PLY
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_PLY_ORDERS = {"ascii": "<", "binary_little_endian": "<", "binary_big_endian": ">"}
+
+
+class _PlyElement:
+    """One ``element`` of a PLY header: its name, row count and properties.
+
+    properties: list of (name, value type, list-count type or None), types as numpy codes.
+    """
+
+    def __init__(self, name: str, count: int):
+        self.name, self.count, self.properties = name, count, []
+
+    def plural(self) -> str:
+        return {"vertex": "vertices", "face": "faces"}.get(self.name, f"'{self.name}' records")
+
+    def index(self, *names: str) -> Optional[int]:
+        for i, prop in enumerate(self.properties):
+            if prop[0] in names:
+                return i
+        return None
+
+
+def _ply_header(data: bytes) -> Tuple[str, List[_PlyElement], int]:
+    """Parse the header -> (format, elements, byte offset of the body)."""
+    if not data.startswith(b"ply"):
+        if not data:
+            raise _BadFile("the file is empty")
+        raise _BadFile("not a PLY file (it does not start with 'ply')")
+    end = re.search(rb"end_header[ \t]*\r?\n", data)
+    if end is None:
+        raise _BadFile("the PLY header is incomplete (no 'end_header' line)")
+    fmt, elements = None, []
+    for line in data[:end.start()].decode("ascii", "replace").splitlines()[1:]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        if words[0] == "format" and len(words) >= 2:
+            fmt = words[1]
+            if fmt not in _PLY_ORDERS:
+                raise _BadFile(f"unknown PLY format {fmt!r} (expected ascii, "
+                               f"binary_little_endian or binary_big_endian)")
+        elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            elements.append(_PlyElement(words[1], int(words[2])))
+        elif words[0] == "property" and elements and len(words) == 3:
+            elements[-1].properties.append((words[2], _ply_type(words[1]), None))
+        elif (words[0] == "property" and elements and len(words) == 5
+              and words[1] == "list"):
+            elements[-1].properties.append((words[4], _ply_type(words[3]),
+                                            _ply_type(words[2])))
+        else:
+            raise _BadFile(f"the PLY header line {line.strip()!r} is not understood")
+    if fmt is None:
+        raise _BadFile("the PLY header has no 'format' line")
+    return fmt, elements, end.end()
+
+
+def _ply_type(word: str) -> str:
+    if word not in _PLY_TYPES:
+        raise _BadFile(f"unknown PLY property type {word!r}")
+    return _PLY_TYPES[word]
+
+
+_SHORT_RUN = 32
+"""Runs of equal-layout rows shorter than this switch a PLY element to the row scan."""
+
+
+def _ply_element_rows(buffer, offset: int, element: _PlyElement, order: str,
+                      as_text: bool) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], int]:
+    """View an element's rows as structured numpy blocks.
+
+    A row's byte layout is fixed once its list lengths are known. The layout of the first row
+    is assumed for as many following rows as possible and verified in one vectorised compare;
+    a new block starts where a list length changes. A mesh of only triangles is one block.
+    Where layouts change often (say triangles and quads interleaved) the rest of the element
+    is handed to :func:`_scattered_rows`, which walks the row starts in a plain loop.
+
+    In text mode ``buffer`` holds the body's numbers as float64 and every value is one float64.
+
+    Returns
+    -------
+    blocks : list of (rows, table): rows, the element row numbers (a slice, or (k,) int64
+        from the row scan); table (k,)
+        structured, field ``p{i}`` holding property i ((k,) scalar or (k, n) list of length n)
+    offset : byte offset just after the element
+    """
+    blocks, done, window = [], 0, element.count
+    while done < element.count:
+        lengths, _ = _ply_row_lengths(buffer, offset, element, order, as_text, done)
+        row = _ply_row_dtype(element, lengths, order, as_text)
+        available = (len(buffer) - offset) // row.itemsize if row.itemsize else window
+        tried = min(element.count - done, window, available)
+        if tried == 0:
+            raise _BadFile(f"the file ends after {done} of {element.count} {element.plural()}")
+        table = np.frombuffer(buffer, row, tried, offset)
+        same = np.ones(tried, dtype=bool)
+        for i, length in lengths.items():
+            same &= table[f"n{i}"] == length
+        taken = tried if same.all() else int(np.argmin(same))
+        blocks.append((slice(done, done + taken), table[:taken]))
+        offset += taken * row.itemsize
+        done += taken
+        if taken < min(_SHORT_RUN, tried):
+            more, offset = _scattered_rows(buffer, offset, element, order, as_text, done)
+            return blocks + more, offset
+        window = 2 * tried
+    return blocks, offset
+
+
+def _ply_row_lengths(buffer, offset: int, element: _PlyElement, order: str, as_text: bool,
+                     row_number: int) -> Tuple[dict, int]:
+    """The list lengths of the row at ``offset`` -> ({property index: length}, row end)."""
+    lengths, at = {}, offset
+    for i, (_, kind, count_kind) in enumerate(element.properties):
+        value = np.dtype("<f8" if as_text else order + kind)
+        if count_kind is not None:
+            count = np.dtype("<f8" if as_text else order + count_kind)
+            if at + count.itemsize > len(buffer):
+                raise _BadFile(f"the file ends after {row_number} of {element.count} "
+                               f"{element.plural()}")
+            length = int(np.frombuffer(buffer, count, 1, at)[0])
+            if length < 0:
+                raise _BadFile(f"a list in {element.plural()} has negative length {length}")
+            lengths[i] = length
+            at += count.itemsize + length * value.itemsize
+        else:
+            at += value.itemsize
+    return lengths, at
+
+
+def _ply_row_dtype(element: _PlyElement, lengths: dict, order: str,
+                   as_text: bool) -> np.dtype:
+    """Structured dtype of one row: fields ``n{i}`` (list lengths) and ``p{i}`` (values)."""
+    names, formats, offsets, at = [], [], [], 0
+    for i, (_, kind, count_kind) in enumerate(element.properties):
+        value = np.dtype("<f8" if as_text else order + kind)
+        if count_kind is not None:
+            count = np.dtype("<f8" if as_text else order + count_kind)
+            names.append(f"n{i}"), formats.append(count), offsets.append(at)
+            at += count.itemsize
+            value = np.dtype((value, (lengths[i],)))
+        names.append(f"p{i}"), formats.append(value), offsets.append(at)
+        at += value.itemsize
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": at})
+
+
+def _scattered_rows(buffer, offset: int, element: _PlyElement, order: str, as_text: bool,
+                    first: int) -> Tuple[List[Tuple[np.ndarray, np.ndarray]], int]:
+    """Rows ``first`` .. end of an element whose row layouts keep changing.
+
+    One loop finds each row's start and list lengths (a few struct reads per row); then the
+    rows of each distinct layout are gathered into one structured block.
+    """
+    steps = []  # per property: (struct format of the count or None, value size)
+    for _, kind, count_kind in element.properties:
+        value_size = 8 if as_text else np.dtype(kind).itemsize
+        count_format = None
+        if count_kind is not None:
+            count_format = "<d" if as_text else order + np.dtype(count_kind).char
+        steps.append((count_format, value_size))
+    rows = element.count - first
+    starts = np.empty(rows, np.int64)
+    lengths = np.empty((rows, sum(f is not None for f, _ in steps)), np.int64)
+    end = len(buffer)
+    try:
+        for r in range(rows):
+            starts[r], j = offset, 0
+            for count_format, value_size in steps:
+                if count_format is None:
+                    offset += value_size
+                    continue
+                length = int(struct.unpack_from(count_format, buffer, offset)[0])
+                lengths[r, j], j = length, j + 1
+                offset += struct.calcsize(count_format) + length * value_size
+            if offset > end:
+                raise struct.error
+    except struct.error:
+        raise _BadFile(f"the file ends after {first + r} of {element.count} "
+                       f"{element.plural()}") from None
+    if lengths.size and lengths.min() < 0:
+        raise _BadFile(f"a list in {element.plural()} has a negative length")
+    list_indices = [i for i, (f, _) in enumerate(steps) if f is not None]
+    raw = np.frombuffer(buffer, np.uint8)
+    blocks = []
+    for layout in np.unique(lengths, axis=0):
+        selected = np.flatnonzero(np.all(lengths == layout, axis=1))
+        row = _ply_row_dtype(element, dict(zip(list_indices, layout.tolist())), order, as_text)
+        table = raw[starts[selected, None] + np.arange(row.itemsize)].view(row).reshape(-1)
+        blocks.append((first + selected, table))
+    return blocks, offset
+
+
+def _read_ply(path: str) -> Mesh:
+    with open(path, "rb") as file:
+        data = file.read()
+    fmt, elements, body_start = _ply_header(data)
+    order = _PLY_ORDERS[fmt]
+    as_text = fmt == "ascii"
+    if as_text:
+        buffer = _numbers(data[body_start:].split(), "PLY data").tobytes()
+    else:
+        buffer = memoryview(data)[body_start:]
+    blocks, offset = {}, 0
+    for element in elements:
+        blocks[element.name], offset = _ply_element_rows(buffer, offset, element, order,
+                                                         as_text)
+    vertex = next((e for e in elements if e.name == "vertex"), None)
+    if vertex is None:
+        raise _BadFile("the PLY file has no 'vertex' element")
+    if vertex.count == 0:
+        raise _BadFile("the file contains no points (0 vertices)")
+
+    def column(i):
+        values = np.empty(vertex.count, np.float64)
+        for rows, table in blocks["vertex"]:
+            values[rows] = table[f"p{i}"]
+        return values
+
+    xyz = [vertex.index(axis) for axis in ("x", "y", "z")]
+    if None in xyz:
+        raise _BadFile("the PLY vertices have no x, y, z properties")
+    vertices = np.stack([column(i) for i in xyz], axis=1)
+    normal_index = [vertex.index(axis) for axis in ("nx", "ny", "nz")]
+    normals = None
+    if None not in normal_index:
+        normals = np.stack([column(i) for i in normal_index], axis=1)
+    colors = None
+    channels = [vertex.index(c, "diffuse_" + c) for c in ("red", "green", "blue", "alpha")]
+    if None not in channels[:3]:
+        channels = [c for c in channels if c is not None]
+        kind = np.dtype(vertex.properties[channels[0]][1])
+        colors = _scaled_colors(np.stack([column(i) for i in channels], axis=1),
+                                np.iinfo(kind).max if kind.kind in "iu" else None)
+    faces = np.zeros((0, 3), np.int64)
+    face = next((e for e in elements if e.name == "face"), None)
+    if face is not None and face.count:
+        index = face.index("vertex_indices", "vertex_index")
+        if index is None or face.properties[index][2] is None:
+            raise _BadFile("the PLY faces have no 'vertex_indices' list")
+        polygons = [(rows, table[f"p{index}"].reshape(len(table), -1))
+                    for rows, table in blocks["face"]]
+        faces = np.concatenate([_fan(corners) for _, corners in polygons])
+        if len(polygons) > 1:
+            # Blocks of the row scan come grouped by polygon size; restore the file's order.
+            row_numbers = np.arange(face.count)
+            origins = np.concatenate([np.repeat(row_numbers[rows], max(corners.shape[1] - 2, 0))
+                                      for rows, corners in polygons])
+            faces = faces[np.argsort(origins, kind="stable")]
+    return Mesh(vertices, faces, normals, colors)
+
+
+def _write_ply(file, vertices, faces, normals, colors) -> None:
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    header = ["ply", "format binary_little_endian 1.0", "comment UDF Reconstruction",
+              f"element vertex {len(vertices)}",
+              "property double x", "property double y", "property double z"]
+    if normals is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+        header += ["property float nx", "property float ny", "property float nz"]
+    channels = ("red", "green", "blue", "alpha")[:0 if colors is None else colors.shape[1]]
+    fields += [(c, "u1") for c in channels]
+    header += [f"property uchar {c}" for c in channels]
+    header += [f"element face {len(faces)}", "property list uchar int vertex_indices",
+               "end_header"]
+    table = np.empty(len(vertices), dtype=fields)
+    table["x"], table["y"], table["z"] = vertices.T
+    if normals is not None:
+        table["nx"], table["ny"], table["nz"] = normals.T
+    for i, channel in enumerate(channels):
+        table[channel] = np.round(colors[:, i] * 255.0)
+    face_table = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
+    face_table["n"], face_table["v"] = 3, faces
+    file.write(("\n".join(header) + "\n").encode("ascii"))
+    file.write(table.tobytes())
+    file.write(face_table.tobytes())
+
+
+# --------------------------------------------------------------------------- OBJ
+
+
+def _obj_buckets(lines: List[bytes]) -> dict:
+    """The rest of each ``v``, ``vn`` and ``f`` line, keyed by the keyword, in one pass."""
+    buckets = {b"v": [], b"vn": [], b"f": []}
+    keys = {b"v ": b"v", b"v\t": b"v", b"vn": b"vn", b"f ": b"f", b"f\t": b"f"}
+    for line in lines:
+        key = keys.get(line[:2])
+        if key is not None:
+            buckets[key].append(line)
+    return {key: [line[len(key):] for line in rows] for key, rows in buckets.items()}
+
+
+def _read_obj(path: str) -> Mesh:
+    with open(path, "rb") as file:
+        data = file.read()
+    if b"#" in data:
+        data = re.sub(rb"#[^\r\n]*", b"", data)
+    lines = [line.strip() for line in data.splitlines()]
+    rows = _obj_buckets(lines)
+    table = _table(rows[b"v"], "a vertex ('v' line)")
+    if len(table) == 0:
+        raise _BadFile("the file contains no points (no 'v' lines)")
+    if table.shape[1] < 3:
+        raise _BadFile("a vertex ('v' line) has fewer than 3 coordinates")
+    vertices = table[:, :3]
+    colors = _text_colors(table[:, 3:6]) if table.shape[1] >= 6 else None
+    normal_table = _table(rows[b"vn"], "a normal ('vn' line)")
+    corners = _obj_corners(rows[b"f"])
+    if corners is not None:
+        vertex_refs, normal_refs = corners
+        if (vertex_refs < 0).any() or (normal_refs is not None and (normal_refs < 0).any()):
+            # Negative indices count back from the vertices (normals) read so far.
+            numbered = list(enumerate(lines))
+            face_lines = [i for i, line in numbered if line.startswith((b"f ", b"f\t"))]
+            seen = {key: np.searchsorted([i for i, line in numbered if line.startswith(key)],
+                                         face_lines)[:, None]
+                    for key in ((b"v ", b"v\t"), (b"vn ", b"vn\t"))}
+            vertex_refs = _obj_resolve(vertex_refs, seen[b"v ", b"v\t"])
+            if normal_refs is not None:
+                normal_refs = _obj_resolve(normal_refs, seen[b"vn ", b"vn\t"])
+        else:
+            vertex_refs = _obj_resolve(vertex_refs, 0)
+            normal_refs = None if normal_refs is None else _obj_resolve(normal_refs, 0)
+        faces = _fan(vertex_refs)
+    else:
+        faces, vertex_refs, normal_refs = _obj_mixed_faces(data)
+    normals = None
+    if len(normal_table):
+        normal_table = normal_table[:, :3]
+        has_refs = normal_refs is not None and normal_refs.size
+        if has_refs and (normal_refs.min() < 0 or normal_refs.max() >= len(normal_table)):
+            raise _BadFile(f"a face refers to normal {normal_refs.max() + 1}, but there are "
+                           f"only {len(normal_table)}")
+        if len(normal_table) == len(vertices) and (
+                not has_refs or np.array_equal(normal_refs, vertex_refs)):
+            normals = normal_table  # one normal per vertex, in vertex order
+        elif has_refs:
+            # Faces say which normal belongs to which vertex; use that when it covers them all.
+            covered = np.zeros(len(vertices), bool)
+            covered[vertex_refs] = True
+            if covered.all():
+                normals = np.zeros((len(vertices), 3))
+                normals[vertex_refs] = normal_table[normal_refs]
+    return Mesh(vertices, faces, normals, colors)
+
+
+def _obj_corners(rows: List[bytes]) -> Optional[Tuple[np.ndarray, Optional[np.ndarray]]]:
+    """Face rows that all have the same corner count and form (``v``, ``v/vt``, ``v//vn``,
+    ``v/vt/vn``) -> raw vertex refs (F, n) and normal refs (F, n) or None; None when mixed."""
+    if not rows:
+        return np.zeros((0, 3), np.int64), None
+    first = rows[0].split()
+    if not first:
+        return None
+    slashes, doubled = first[0].count(b"/"), b"//" in first[0]
+    joined = b" ".join(rows)
+    corners = len(rows) * len(first)
+    if (len(joined.split()) != corners or joined.count(b"/") != corners * slashes
+            or joined.count(b"//") != (corners if doubled else 0)):
+        return None
+    fields = slashes + 1 - doubled
+    try:
+        refs = np.array(joined.replace(b"//", b"/").replace(b"/", b" ").split(), np.int64)
+    except ValueError:
+        return None  # let the row-by-row reader name the bad index
+    refs = refs.reshape(len(rows), len(first), fields)
+    return refs[..., 0], refs[..., -1] if slashes == 2 else None
+
+
+def _obj_resolve(refs: np.ndarray, seen) -> np.ndarray:
+    """1-based or negative (relative to ``seen`` items read so far) OBJ refs -> 0-based."""
+    if refs.size and (refs == 0).any():
+        raise _BadFile("a face has index 0 (OBJ indices start at 1)")
+    return np.where(refs > 0, refs - 1, refs + seen)
+
+
+def _obj_mixed_faces(data: bytes) -> Tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
+    """Faces of mixed sizes or corner forms, one line at a time.
+
+    Returns fan triangles (T, 3), and every corner's vertex and normal refs (0-based,
+    flattened); the normal refs are None when some corner has none.
+    """
+    vertex_count = normal_count = 0
+    polygons, vertex_refs, normal_refs = [], [], []
+    for line in data.splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == b"v":
+            vertex_count += 1
+        elif parts[0] == b"vn":
+            normal_count += 1
+        elif parts[0] == b"f":
+            polygon = []
+            for corner in parts[1:]:
+                refs = corner.split(b"/")
+                polygon.append(_obj_index(refs[0], vertex_count, "vertex"))
+                if len(refs) > 2 and refs[2]:
+                    normal_refs.append(_obj_index(refs[2], normal_count, "normal"))
+            vertex_refs.extend(polygon)
+            polygons.append(polygon)
+    normals = np.array(normal_refs, np.int64) if len(normal_refs) == len(vertex_refs) else None
+    return _fan_lists(polygons), np.array(vertex_refs, np.int64), normals
+
+
+def _obj_index(token: bytes, count_so_far: int, what: str) -> int:
+    """A 1-based (or negative, relative) OBJ index -> 0-based index."""
+    try:
+        index = int(token)
+    except ValueError:
+        raise _BadFile(f"a face has {what} index {token.decode('utf-8', 'replace')!r}, "
+                       f"which is not a whole number") from None
+    if index == 0:
+        raise _BadFile(f"a face has {what} index 0 (OBJ indices start at 1)")
+    return index - 1 if index > 0 else count_so_far + index
+
+
+def _write_obj(file, vertices, faces, normals, colors) -> None:
+    file.write(b"# UDF Reconstruction\n")
+    if colors is not None:
+        rows = np.concatenate([vertices, colors[:, :3]], axis=1)
+        _write_rows(file, "v" + " %.17g" * 3 + " %.6g" * 3 + "\n", rows)
+    else:
+        _write_rows(file, "v %.17g %.17g %.17g\n", vertices)
+    if normals is not None:
+        _write_rows(file, "vn %.9g %.9g %.9g\n", normals)
+        _write_rows(file, "f %d//%d %d//%d %d//%d\n", np.repeat(faces + 1, 2, axis=1))
+    else:
+        _write_rows(file, "f %d %d %d\n", faces + 1)
+
+
+def _write_rows(file, row_format: str, rows: np.ndarray) -> None:
+    file.write("".join(row_format % tuple(row) for row in rows.tolist()).encode("ascii"))
+
+
+# --------------------------------------------------------------------------- OFF
+
+_OFF_KEYWORD = re.compile(rb"^(ST)?(C)?(N)?(4)?(n)?OFF$")
+
+
+def _read_off(path: str) -> Mesh:
+    with open(path, "rb") as file:
+        data = file.read()
+    lines = _text_lines(data)
+    if not lines:
+        raise _BadFile("the file is empty")
+    words = lines[0].split()
+    keyword = _OFF_KEYWORD.match(words[0])
+    if keyword is None:
+        raise _BadFile("not an OFF file (the first line is not 'OFF', 'COFF', 'NOFF', ...)")
+    has_st, has_color, has_normal, four_d, n_dim = keyword.groups()
+    if four_d or n_dim:
+        raise _BadFile("4-D and n-D OFF files are not supported; use 3-D vertices")
+    counts, body = words[1:], lines[1:]
+    if not counts:
+        if not body:
+            raise _BadFile("the file ends before the vertex and face counts")
+        counts, body = body[0].split(), body[1:]
+    try:
+        vertex_count, face_count = int(counts[0]), int(counts[1])
+    except (ValueError, IndexError):
+        raise _BadFile("the line after 'OFF' must give the vertex and face counts") from None
+    if len(body) < vertex_count:
+        raise _BadFile(f"the file ends after {len(body)} of {vertex_count} vertices")
+    if len(body) < vertex_count + face_count:
+        raise _BadFile(f"the file ends after {len(body) - vertex_count} of {face_count} faces")
+    table = _table(body[:vertex_count], "a vertex")
+    if vertex_count and table.shape[1] < 3:
+        raise _BadFile("a vertex has fewer than 3 coordinates")
+    vertices, at = table[:, :3], 3
+    normals = None
+    if has_normal and table.shape[1] >= at + 3:
+        normals, at = table[:, at:at + 3], at + 3
+    colors = None
+    channels = table.shape[1] - at - (2 if has_st else 0)
+    if has_color and channels in (3, 4):
+        colors = _text_colors(table[:, at:at + channels])
+    return Mesh(vertices, _off_faces(body[vertex_count:vertex_count + face_count]),
+                normals, colors)
+
+
+def _off_faces(rows: List[bytes]) -> np.ndarray:
+    """OFF face lines ``n i1 .. in [colour]`` -> fan-triangulated (F, 3) int64."""
+    if not rows:
+        return np.zeros((0, 3), np.int64)
+    table = _table(rows, "a face")
+    sizes = table[:, 0]
+    if len(table) and table.shape[1] > sizes[0] and np.all(sizes == sizes[0]):
+        return _fan(table[:, 1:1 + int(sizes[0])])
+    polygons = []
+    for row in rows:
+        values = row.split()
+        size = int(values[0])
+        if len(values) < size + 1:
+            raise _BadFile(f"a face lists {size} vertices but gives only {len(values) - 1}")
+        polygons.append([int(v) for v in values[1:size + 1]])
+    return _fan_lists(polygons)
+
+
+def _write_off(file, vertices, faces, normals, colors) -> None:
+    keyword = ("C" if colors is not None else "") + ("N" if normals is not None else "") + "OFF"
+    file.write(f"{keyword}\n{len(vertices)} {len(faces)} 0\n".encode("ascii"))
+    columns, row_format = [vertices], "%.17g %.17g %.17g"
+    if normals is not None:
+        columns.append(normals)
+        row_format += " %.9g %.9g %.9g"
+    if colors is not None:
+        columns.append(colors)
+        row_format += " %.6g" * colors.shape[1]
+    _write_rows(file, row_format + "\n", np.concatenate(columns, axis=1))
+    _write_rows(file, "3 %d %d %d\n", faces)
+
+
+# --------------------------------------------------------------------------- XYZ / PTS / TXT / NPY
+
+
+def _read_columns(path: str) -> Mesh:
+    """Text columns: x y z, then optional intensity, normals and colours (see _split_columns).
+
+    Separators are whitespace, commas or semicolons; ``#`` and ``//`` start comments; a line
+    holding one whole number (a PTS point count) is skipped; a first line with no numbers
+    (column names) is skipped.
+    """
+    with open(path, "rb") as file:
+        data = file.read()
+    rows = []
+    for line in data.replace(b",", b" ").replace(b";", b" ").splitlines():
+        line = line.split(b"#", 1)[0].split(b"//", 1)[0].strip()
+        if line and not line.isdigit():
+            rows.append(line)
+    if rows and not any(_is_number(word) for word in rows[0].split()):
+        rows = rows[1:]
+    if not rows:
+        raise _BadFile("the file contains no points")
+    width = len(rows[0].split())
+    tokens = b" ".join(rows).split()
+    if len(tokens) != width * len(rows):
+        bad = next(i for i, row in enumerate(rows) if len(row.split()) != width)
+        raise _BadFile(f"data line {bad + 1} has {len(rows[bad].split())} values, but the "
+                       f"first data line has {width}; every line needs the same columns")
+    table = _numbers(tokens, "the point data").reshape(len(rows), width)
+    return _split_columns(table)
+
+
+def _is_number(word: bytes) -> bool:
+    try:
+        float(word)
+        return True
+    except ValueError:
+        return False
+
+
+def _split_columns(table: np.ndarray) -> Mesh:
+    """Columns of numbers -> points with optional normals and colours.
+
+    3: x y z; 4: x y z intensity; 6: x y z + triple; 7: x y z intensity + triple (PTS);
+    9: x y z + triple + triple; 10: x y z intensity + two triples; other widths >= 3: x y z
+    and the rest ignored. Intensity is ignored; each triple is classified by
+    :func:`_triple_kind`.
+    """
+    if table.ndim != 2 or table.shape[1] < 3:
+        raise _BadFile(f"needs at least 3 columns (x y z), found "
+                       f"{table.shape[1] if table.ndim == 2 else table.ndim}")
+    starts = {6: [3], 7: [4], 9: [3, 6], 10: [4, 7]}.get(table.shape[1], [])
+    normals = colors = None
+    for start in starts:
+        triple = table[:, start:start + 3]
+        kind = _triple_kind(triple)
+        if kind == "normals" and normals is None:
+            normals = triple
+        elif kind == "colors255" and colors is None:
+            colors = _scaled_colors(triple, 255)
+        elif kind == "colors" and colors is None:
+            colors = _scaled_colors(triple, None)
+    return Mesh(table[:, :3], np.zeros((0, 3), np.int64), normals, colors)
+
+
+def _triple_kind(triple: np.ndarray) -> Optional[str]:
+    """Decide whether three columns are normals or colours; the first rule that fits wins.
+
+    1. every value a whole number in 0..255 and some value above 1 -> ``colors255`` (/255);
+    2. some value negative, or every row of unit length (within 0.01) -> ``normals``;
+    3. every value in [0, 1] -> ``colors``;
+    4. otherwise ``None``: the columns are ignored.
+    """
+    if triple.size == 0 or not np.isfinite(triple).all():
+        return None
+    low, high = triple.min(), triple.max()
+    if low >= 0 and high <= 255 and high > 1 and np.all(triple == np.round(triple)):
+        return "colors255"
+    if low < 0 or np.all(np.abs(np.linalg.norm(triple, axis=1) - 1.0) < 0.01):
+        return "normals"
+    if low >= 0 and high <= 1:
+        return "colors"
+    return None
+
+
+def _read_npy(path: str) -> Mesh:
+    try:
+        array = np.load(path, allow_pickle=False)
+    except ValueError as error:
+        raise _BadFile(f"not a readable NPY array ({error})") from None
+    if not isinstance(array, np.ndarray) or array.dtype.kind not in "iuf":
+        raise _BadFile("the NPY file must hold a numeric (N, 3) or (N, 6) array")
+    if array.ndim != 2 or array.shape[1] not in (3, 6):
+        raise _BadFile(f"the array has shape {array.shape}; expected (N, 3) points or "
+                       f"(N, 6) points with normals or colours")
+    return _split_columns(array.astype(np.float64))
+
+
+def _read_npz(path: str) -> Mesh:
+    try:
+        archive = np.load(path, allow_pickle=False)
+        if not hasattr(archive, "files"):
+            raise _BadFile("not an NPZ archive (it holds a single NPY array)")
+        with archive:
+            arrays = {key: archive[key] for key in archive.files}
+    except (ValueError, zipfile.BadZipFile, zlib.error, EOFError) as error:
+        raise _BadFile(f"not a readable NPZ archive ({error})") from None
+    key = "points" if "points" in arrays else "vertices" if "vertices" in arrays else None
+    if key is None:
+        raise _BadFile(f"has no 'points' or 'vertices' array (it has: "
+                       f"{', '.join(sorted(arrays)) or 'nothing'})")
+    vertices = _npz_array(arrays, key, (3,))
+    normals = _npz_array(arrays, "normals", (3,)) if "normals" in arrays else None
+    colors = None
+    if "colors" in arrays:
+        raw = _npz_array(arrays, "colors", (3, 4))
+        colors = _scaled_colors(raw, np.iinfo(raw.dtype).max if raw.dtype.kind in "iu" else None)
+    faces = np.zeros((0, 3), np.int64)
+    if "faces" in arrays:
+        raw = arrays["faces"]
+        if raw.ndim != 2 or raw.dtype.kind not in "iu":
+            raise _BadFile(f"'faces' must be an (F, 3) integer array, not {raw.dtype} "
+                           f"with shape {raw.shape}")
+        faces = _fan(raw)
+    for name, values in (("normals", normals), ("colors", colors)):
+        if values is not None and len(values) != len(vertices):
+            raise _BadFile(f"'{name}' has {len(values)} rows but '{key}' has {len(vertices)}")
+    return Mesh(vertices, faces, normals, colors)
+
+
+def _npz_array(arrays: dict, key: str, widths: Tuple[int, ...]) -> np.ndarray:
+    array = arrays[key]
+    if array.ndim != 2 or array.shape[1] not in widths or array.dtype.kind not in "iuf":
+        raise _BadFile(f"'{key}' must be a numeric (N, {' or '.join(map(str, widths))}) "
+                       f"array, not {array.dtype} with shape {array.shape}")
+    return array
+
+
+# --------------------------------------------------------------------------- LAS / LAZ
+
+
+def _read_las(path: str) -> Mesh:
+    import laspy  # only LAS/LAZ users need it
+
+    try:
+        las = laspy.read(path)
+    except laspy.errors.LaspyException as error:
+        if "backend" in str(error).lower():
+            raise _BadFile("cannot decompress LAZ; install the 'lazrs' package "
+                           "(pip install 'laspy[lazrs]')") from None
+        raise _BadFile(f"not a readable LAS/LAZ file ({error})") from None
+    # las.x etc. apply the file's scale and offset.
+    vertices = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
+    colors = None
+    if "red" in las.point_format.dimension_names:
+        rgb = np.stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)], 1)
+        colors = _scaled_colors(rgb, 65535)
+    return Mesh(vertices.astype(np.float64), np.zeros((0, 3), np.int64), None, colors)
+
+
+_READERS = {"ply": _read_ply, "obj": _read_obj, "off": _read_off, "xyz": _read_columns,
+            "pts": _read_columns, "txt": _read_columns, "npy": _read_npy, "npz": _read_npz,
+            "las": _read_las, "laz": _read_las}
+_WRITERS = {"ply": _write_ply, "obj": _write_obj, "off": _write_off}
