@@ -1,0 +1,199 @@
+"""The radius selector: predicts each query's ball radius from its parent patch (the paper's
+learned radius).
+
+Input per query: the (up to) PARENT_POINTS nearest input points within the parent radius R,
+as ``rel = (p - q) / R`` (the patch contract of :mod:`engine.patches`). Features:
+
+- a masked ResNet-PointNet over every STRIDE-th of those points (nearest first, so the stride
+  keeps the radial spread of the whole ball while bounding cost) -> a 256-d code;
+- log(1 + N) with N the points in the parent ball (saturating at PARENT_POINTS);
+- a 6-bin radial density histogram: the share of the ball's points in each shell of width R/6.
+
+A 3-layer MLP with a sigmoid gives s in (0, 1); rho = rho_min + (rho_max - rho_min) * s and
+r_hat = rho * R. The range is applied at inference, so changing rho_min / rho_max needs no
+retraining (the network learns where in the range to sit).
+
+Two implementations read one weights file: :class:`NumpySelector` (CPU, Blender) and the torch
+module from :func:`build_selector_torch` (training, CUDA).
+"""
+
+from pathlib import Path
+from typing import Dict, Optional, Tuple, Union
+
+import numpy as np
+
+from .patches import gather_patches
+from .weights_file import read_weights
+
+DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
+PARENT_POINTS = 128
+STRIDE = 4
+HISTOGRAM_BINS = 6
+
+DEFAULT_CONFIG = {
+    "hidden": 32,      # H of the ResNet-PointNet
+    "blocks": 3,       # ResNet blocks
+    "code": 256,       # the patch code's width (the paper's 256-d feature)
+    "mlp": [128, 64],  # hidden widths of the 3-layer MLP
+}
+
+
+def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
+                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the selector reads for each query.
+
+    Returns
+    -------
+    rel : (Q, PARENT_POINTS // STRIDE, 3) float32, strided parent-patch points / R
+    mask : (Q, PARENT_POINTS // STRIDE) bool
+    extra : (Q, 1 + HISTOGRAM_BINS) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram]
+    """
+    rel, mask, counts = gather_patches(tree, points, queries, parent_radius, PARENT_POINTS)
+    dist = np.sqrt(np.sum(rel.astype(np.float64) ** 2, axis=2))
+    shell = np.minimum((dist * HISTOGRAM_BINS).astype(np.int64), HISTOGRAM_BINS - 1)
+    hist = np.zeros((len(counts), HISTOGRAM_BINS))
+    for b in range(HISTOGRAM_BINS):
+        hist[:, b] = np.sum(mask & (shell == b), axis=1)
+    hist /= np.maximum(counts, 1)[:, None]
+    log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)
+    extra = np.column_stack([log_count, hist]).astype(np.float32)
+    return rel[:, ::STRIDE], mask[:, ::STRIDE], extra
+
+
+def macs_per_query(config: Dict) -> int:
+    """Multiply-accumulates of one selector pass (layers only)."""
+    h, points = config["hidden"], PARENT_POINTS // STRIDE
+    per_point = 3 * 2 * h + config["blocks"] * (2 * h * h + h * h + 2 * h * h)
+    widths = [config["code"] + 1 + HISTOGRAM_BINS] + config["mlp"] + [1]
+    mlp = sum(a * b for a, b in zip(widths, widths[1:]))
+    return points * per_point + h * config["code"] + mlp
+
+
+class NumpySelector:
+    """Pure-numpy forward pass. ``predict_unit(rel, mask, extra) -> (Q,) s in (0, 1)``."""
+
+    def __init__(self, params: Dict[str, np.ndarray], config: Dict):
+        self.config = dict(config)
+        self.p = {k: (np.ascontiguousarray(v.T) if v.ndim == 2 else v).astype(np.float32)
+                  for k, v in params.items()}
+
+    def _linear(self, x, name, bias=True):
+        y = x @ self.p[name + ".weight"]
+        return y + self.p[name + ".bias"] if bias else y
+
+    def _block(self, x, name):
+        """ResNet block: fc_1(relu(fc_0(relu(x)))) + shortcut(x)."""
+        t = self._linear(np.maximum(x, 0), name + ".fc0")
+        t = self._linear(np.maximum(t, 0), name + ".fc1")
+        return t + self._linear(x, name + ".shortcut", bias=False)
+
+    def _forward(self, rel, mask, extra):
+        b, n, _ = rel.shape
+        h = self.config["hidden"]
+        pad = np.where(mask, np.float32(0), np.float32(-np.inf))[:, :, None]
+        net = self._linear(rel.reshape(b * n, 3), "pos")                  # (b*n, 2H)
+        for k in range(self.config["blocks"]):
+            if k:
+                pooled = (net.reshape(b, n, h) + pad).max(axis=1)
+                net = np.concatenate([net.reshape(b, n, h),
+                                      np.broadcast_to(pooled[:, None], (b, n, h))], axis=2)
+                net = net.reshape(b * n, 2 * h)
+            net = self._block(net, f"block{k}")                           # (b*n, H)
+        pooled = (net.reshape(b, n, h) + pad).max(axis=1)
+        code = self._linear(np.maximum(pooled, 0), "code")                # (b, 256)
+        z = np.concatenate([code, extra], axis=1)
+        for k in range(len(self.config["mlp"])):
+            z = np.maximum(self._linear(z, f"mlp{k}"), 0)
+        z = self._linear(z, "out")[:, 0]
+        return (0.5 * (1.0 + np.tanh(0.5 * z))).astype(np.float32)  # overflow-free sigmoid
+
+    def predict_unit(self, rel, mask, extra, batch_size: int = 4096) -> np.ndarray:
+        rel = np.asarray(rel, dtype=np.float32)
+        out = np.empty(rel.shape[0], dtype=np.float32)
+        for start in range(0, rel.shape[0], batch_size):
+            stop = start + batch_size
+            out[start:stop] = self._forward(rel[start:stop], mask[start:stop], extra[start:stop])
+        return out
+
+
+def predict_radii(selector, tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
+                  rho_min: float, rho_max: float) -> np.ndarray:
+    """Per-query radii r_hat = rho * R with rho in [rho_min, rho_max]; (Q,) float64, unit frame.
+
+    A query whose parent ball is empty keeps rho_max (the backbone treats it as far anyway).
+    """
+    rel, mask, extra = parent_features(tree, points, queries, parent_radius)
+    s = np.ones(len(queries), dtype=np.float64)
+    has_points = mask.any(axis=1)
+    if np.any(has_points):
+        s[has_points] = selector.predict_unit(rel[has_points], mask[has_points],
+                                              extra[has_points])
+    return (rho_min + (rho_max - rho_min) * s) * parent_radius
+
+
+def _torch_module_class():
+    """The torch module class, built lazily so that importing this file never imports torch."""
+    import torch
+    from torch import nn
+
+    class Block(nn.Module):
+        def __init__(self, size_in, size_out):
+            super().__init__()
+            self.fc0 = nn.Linear(size_in, size_out)
+            self.fc1 = nn.Linear(size_out, size_out)
+            self.shortcut = nn.Linear(size_in, size_out, bias=False)
+            nn.init.zeros_(self.fc1.weight)
+
+        def forward(self, x):
+            return self.fc1(torch.relu(self.fc0(torch.relu(x)))) + self.shortcut(x)
+
+    class RadiusSelector(nn.Module):
+        """forward(rel (B,N,3), mask (B,N) bool, extra (B,7)) -> (B,) s in (0, 1)."""
+
+        def __init__(self, config: Optional[Dict] = None):
+            super().__init__()
+            self.config = dict(DEFAULT_CONFIG if config is None else config)
+            h = self.config["hidden"]
+            self.pos = nn.Linear(3, 2 * h)
+            for k in range(self.config["blocks"]):
+                setattr(self, f"block{k}", Block(2 * h, h))
+            self.code = nn.Linear(h, self.config["code"])
+            widths = [self.config["code"] + 1 + HISTOGRAM_BINS] + self.config["mlp"]
+            for k, (a, b) in enumerate(zip(widths, widths[1:])):
+                setattr(self, f"mlp{k}", nn.Linear(a, b))
+            self.out = nn.Linear(widths[-1], 1)
+
+        def forward(self, rel, mask, extra):
+            neg = ~mask[:, :, None]
+            net = self.pos(rel)
+            for k in range(self.config["blocks"]):
+                if k:
+                    pooled = net.masked_fill(neg, float("-inf")).max(dim=1).values
+                    net = torch.cat([net, pooled[:, None].expand_as(net)], dim=2)
+                net = getattr(self, f"block{k}")(net)
+            pooled = net.masked_fill(neg, float("-inf")).max(dim=1).values
+            z = torch.cat([self.code(torch.relu(pooled)), extra], dim=1)
+            for k in range(len(self.config["mlp"])):
+                z = torch.relu(getattr(self, f"mlp{k}")(z))
+            return torch.sigmoid(self.out(z)[:, 0])
+
+    return RadiusSelector
+
+
+def build_selector_torch(config: Optional[Dict] = None):
+    """A freshly initialised torch selector (for training)."""
+    return _torch_module_class()(config)
+
+
+def load_selector_numpy(path: Union[str, Path, None] = None) -> NumpySelector:
+    """The numpy selector from a weights file (default ``engine/weights/selector.npz``)."""
+    params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)
+    return NumpySelector(params, header["config"])
+
+
+def load_selector_torch(path: Union[str, Path, None] = None, device: str = "cpu"):
+    import torch
+    params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)
+    module = build_selector_torch(header["config"])
+    module.load_state_dict({k: torch.from_numpy(v) for k, v in params.items()})
+    return module.to(device).eval()

@@ -1,0 +1,74 @@
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from engine.selector import (DEFAULT_CONFIG, NumpySelector, build_selector_torch, macs_per_query,
+                             parent_features, predict_radii)
+
+torch = pytest.importorskip("torch")
+
+
+def _random_selector(seed=0):
+    torch.manual_seed(seed)
+    module = build_selector_torch()
+    with torch.no_grad():  # the zero-initialised residual layers would hide mistakes
+        for p in module.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    params = {k: v.numpy() for k, v in module.state_dict().items()}
+    return module.eval(), NumpySelector(params, module.config)
+
+
+def _cloud(seed=0, n=20000):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-0.5, 0.5, (n, 2))
+    return np.column_stack([xy, 0.05 * np.sin(8 * xy[:, 0])])
+
+
+def test_numpy_and_torch_selectors_agree():
+    module, numpy_selector = _random_selector()
+    points = _cloud()
+    queries = points[:300] + 0.005
+    rel, mask, extra = parent_features(cKDTree(points), points, queries, 0.024)
+    with torch.no_grad():
+        expected = module(torch.from_numpy(rel), torch.from_numpy(mask),
+                          torch.from_numpy(extra)).numpy()
+    np.testing.assert_allclose(numpy_selector.predict_unit(rel, mask, extra), expected,
+                               atol=1e-5)
+
+
+def test_output_always_stays_in_the_requested_range():
+    _, selector = _random_selector(1)
+    points = _cloud(1)
+    rng = np.random.default_rng(2)
+    queries = np.concatenate([points[:500] + rng.normal(0, 0.01, (500, 3)),
+                              [[3.0, 3.0, 3.0]]])  # the last one sees no point at all
+    for rho_min, rho_max in [(0.5, 1.0), (0.2, 0.4), (0.75, 0.75)]:
+        radii = predict_radii(selector, cKDTree(points), points, queries, 0.024, rho_min, rho_max)
+        assert radii.min() >= rho_min * 0.024 - 1e-12
+        assert radii.max() <= rho_max * 0.024 + 1e-12
+    assert radii[-1] == pytest.approx(0.75 * 0.024)
+
+
+def test_one_querys_answer_does_not_depend_on_the_rest_of_the_batch():
+    _, selector = _random_selector(3)
+    points = _cloud(3)
+    rel, mask, extra = parent_features(cKDTree(points), points, points[:200] + 0.003, 0.024)
+    together = selector.predict_unit(rel, mask, extra)
+    alone = np.array([selector.predict_unit(rel[i:i + 1], mask[i:i + 1], extra[i:i + 1])[0]
+                      for i in (0, 57, 199)])
+    np.testing.assert_allclose(alone, together[[0, 57, 199]], atol=1e-6)
+
+
+def test_parent_features_histogram_and_count():
+    points = _cloud(4, 5000)
+    rel, mask, extra = parent_features(cKDTree(points), points, points[:50], 0.024)
+    assert rel.shape == (50, 32, 3) and mask.shape == (50, 32)
+    np.testing.assert_allclose(extra[:, 1:].sum(axis=1), 1.0, atol=1e-6)
+    assert np.all(np.linalg.norm(rel[mask], axis=1) <= 1.0 + 1e-6)
+
+
+def test_selector_is_small():
+    module = build_selector_torch()
+    parameters = sum(p.numel() for p in module.parameters())
+    assert parameters < 100_000
+    assert macs_per_query(DEFAULT_CONFIG) < 700_000
