@@ -1,0 +1,85 @@
+"""Training data for the radius selector: per-query parent-patch features and the frozen
+backbone's UDF error at each candidate radius, cached on disk one file per shape (resumable).
+
+Shapes come from the benchmark's *training* seeds (disjoint from its test seeds by
+construction). Each shape is scanned under one of the clean / sparse / noisy conditions (chosen
+by its seed), so the selector sees the densities and noise where the radius matters most.
+Queries are drawn uniformly in the union of the balls of the largest candidate radius around the
+input points: the same region as the field's query band.
+"""
+
+from pathlib import Path
+from typing import Callable, Dict
+
+import numpy as np
+
+from ..bench.dataset import make_input, make_shape
+from ..field import _predict_trimmed as predict_trimmed
+from ..frame import UnitFrame
+from ..patches import MAX_POINTS, gather_patches
+from ..selector import parent_features
+from .mesh_distance import point_mesh_distance
+from .radius_targets import CANDIDATE_RADII
+
+TRAINING_CONDITIONS = ("clean", "sparse", "noisy")
+Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def band_queries(points: np.ndarray, count: int, radius: float,
+                 rng: np.random.Generator) -> np.ndarray:
+    """``count`` points uniform in volume within ``radius`` of random input points; (count, 3)."""
+    centres = points[rng.integers(0, len(points), count)]
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    return centres + direction * (radius * rng.random(count) ** (1 / 3))[:, None]
+
+
+def backbone_udf(predict: Predictor, tree, points: np.ndarray, queries: np.ndarray,
+                 radii: np.ndarray) -> np.ndarray:
+    """The field's UDF at ``queries`` with per-query ``radii``: backbone where the ball holds
+    points, the nearest-point distance where it is empty (as :mod:`engine.field` does)."""
+    radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(queries),))
+    values = tree.query(queries, workers=-1)[0]
+    rel, mask, counts = gather_patches(tree, points, queries, radii, MAX_POINTS)
+    filled = np.flatnonzero(counts > 0)
+    values[filled] = predict_trimmed(predict, rel[filled], mask[filled], counts[filled],
+                                     1024) * radii[filled]
+    return values
+
+
+def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[str, np.ndarray]:
+    """One training shape scanned and framed as at inference, with queries and exact UDF."""
+    from scipy.spatial import cKDTree
+
+    gt = make_shape(domain, seed)
+    condition = TRAINING_CONDITIONS[seed % len(TRAINING_CONDITIONS)]
+    cloud = make_input(gt, domain, condition, seed)
+    frame = UnitFrame.from_points(cloud.points)
+    points = frame.to_unit(cloud.points)
+    rng = np.random.default_rng([query_seed, seed, 11])
+    q = band_queries(points, queries, float(CANDIDATE_RADII[-1]), rng)
+    udf = point_mesh_distance(frame.to_unit(gt.vertices), gt.faces, q, rng)
+    return {"points": points, "queries": q, "udf": udf, "tree": cKDTree(points),
+            "condition": condition}
+
+
+def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent_radius: float,
+                cache_dir: Path, query_seed: int = 0) -> Dict[str, np.ndarray]:
+    """Selector inputs and error curves for one shape; read from ``cache_dir`` when present."""
+    path = Path(cache_dir) / f"{domain}_{seed}_{queries}_{query_seed}.npz"
+    if path.exists():
+        with np.load(path) as data:
+            return {k: data[k] for k in data.files}
+    scene = shape_scene(domain, seed, queries, query_seed)
+    errors = np.stack([np.abs(backbone_udf(predict, scene["tree"], scene["points"],
+                                           scene["queries"], r) - scene["udf"])
+                       for r in CANDIDATE_RADII], axis=1)
+    rel, mask, extra = parent_features(scene["tree"], scene["points"], scene["queries"],
+                                       parent_radius)
+    data = {"rel": rel, "mask": mask, "extra": extra, "errors": errors.astype(np.float32),
+            "udf": scene["udf"].astype(np.float32)}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.npz")
+    np.savez(tmp, **data)
+    tmp.replace(path)
+    return data

@@ -1,0 +1,153 @@
+"""Train the radius selector against the frozen backbone and export ``engine/weights/selector.npz``.
+
+    python -m engine.training.train_selector --out engine/weights/selector.npz --seed 0
+        [--shapes 40] [--queries 3000] [--epochs 12] [--cache-dir out/selector_cache]
+
+1. Error curves: for ``--shapes`` car and garment *training* shapes each (benchmark train seeds,
+   disjoint from the test seeds), ``--queries`` band queries per shape, the backbone's absolute
+   UDF error at the K = 7 candidate radii 0.012 ... 0.024 (cached per shape, resumable).
+2. Targets: the parabola vertex through each curve's minimum (:mod:`.radius_targets`), loss
+   weight w = max(e) - min(e); loss w * |r_hat - r*| / (r_max - r_min).
+3. Evaluation on held-out queries of held-out shapes (5 more training seeds per domain, rooms
+   included although rooms are never trained on): mean absolute UDF error of every single fixed
+   candidate radius, the curvature policy and the learned selector, run through the backbone at
+   each policy's radii.
+"""
+
+import argparse
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..backbone import DEFAULT_WEIGHTS
+from ..bench.dataset import train_seeds
+from ..curvature import curvature_radii
+from ..field import backbone_predictor
+from ..selector import NumpySelector, build_selector_torch, predict_radii
+from ..weights_file import save_weights
+from .radius_targets import CANDIDATE_RADII, loss_weights, parabola_targets
+from .selector_data import backbone_udf, shape_cache, shape_scene
+
+TRAIN_DOMAINS = ("cars", "garments")
+EVAL_DOMAINS = ("cars", "garments", "rooms")
+HELD_OUT = 5
+
+
+def load_training_set(args, predict):
+    parts = []
+    for domain in TRAIN_DOMAINS:
+        for i, seed in enumerate(train_seeds(domain, args.shapes)):
+            started = time.time()
+            parts.append(shape_cache(domain, seed, predict, args.queries, args.parent_radius,
+                                     Path(args.cache_dir)))
+            print(f"cache {domain} {i + 1}/{args.shapes} ({time.time() - started:.1f} s)",
+                  flush=True)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def train(args, data):
+    import torch
+
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+    targets = torch.from_numpy(parabola_targets(data["errors"]).astype(np.float32))
+    weights = torch.from_numpy(loss_weights(data["errors"]).astype(np.float32))
+    weights = weights / weights.mean()  # scale-free: keeps the learning rate meaningful
+    rel, mask, extra = (torch.from_numpy(data[k]) for k in ("rel", "mask", "extra"))
+    r_min, r_max = args.rho_min * args.parent_radius, args.rho_max * args.parent_radius
+    model = build_selector_torch()
+    optimiser = torch.optim.Adam(model.parameters(), lr=args.lr)
+    steps_per_epoch = len(targets) // args.batch
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, args.lr,
+                                                   total_steps=args.epochs * steps_per_epoch)
+    generator = torch.Generator().manual_seed(args.seed)
+    for epoch in range(args.epochs):
+        order = torch.randperm(len(targets), generator=generator)
+        total = 0.0
+        for step in range(steps_per_epoch):
+            batch = order[step * args.batch:(step + 1) * args.batch]
+            s = model(rel[batch], mask[batch], extra[batch])
+            r_hat = r_min + (r_max - r_min) * s
+            loss = torch.mean(weights[batch] * torch.abs(r_hat - targets[batch])) / (r_max - r_min)
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            schedule.step()
+            total += float(loss)
+        print(f"epoch {epoch + 1}/{args.epochs} loss {total / steps_per_epoch:.5f}", flush=True)
+    return model
+
+
+def evaluate(args, predict, selector):
+    """Mean |UDF error| per policy and domain on held-out shapes (unit frame)."""
+    results = {}
+    for domain in EVAL_DOMAINS:
+        seeds = train_seeds(domain, args.shapes + HELD_OUT)[args.shapes:]
+        errors = {f"fixed {r:.3f}": [] for r in CANDIDATE_RADII}
+        errors.update({"curvature": [], "learned": [], "oracle grid radius": []})
+        for seed in seeds:
+            scene = shape_scene(domain, seed, args.queries, query_seed=1)
+            tree, points, queries, udf = (scene[k] for k in ("tree", "points", "queries", "udf"))
+            per_radius = []
+            for r in CANDIDATE_RADII:
+                err = np.abs(backbone_udf(predict, tree, points, queries, r) - udf)
+                errors[f"fixed {r:.3f}"].append(err)
+                per_radius.append(err)
+            errors["oracle grid radius"].append(np.min(per_radius, axis=0))
+            radii = curvature_radii(tree, points, queries, args.parent_radius,
+                                    args.rho_min, args.rho_max)
+            errors["curvature"].append(np.abs(backbone_udf(predict, tree, points, queries,
+                                                           radii) - udf))
+            radii = predict_radii(selector, tree, points, queries, args.parent_radius,
+                                  args.rho_min, args.rho_max)
+            errors["learned"].append(np.abs(backbone_udf(predict, tree, points, queries,
+                                                         radii) - udf))
+        results[domain] = {k: float(np.mean(np.concatenate(v))) for k, v in errors.items()}
+        fixed = {k: v for k, v in results[domain].items() if k.startswith("fixed")}
+        results[domain]["best fixed"] = min(fixed.values())
+        print(domain, json.dumps(results[domain]), flush=True)
+    return results
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="engine/weights/selector.npz")
+    parser.add_argument("--cache-dir", default="out/selector_cache")
+    parser.add_argument("--shapes", type=int, default=40, help="training shapes per domain")
+    parser.add_argument("--queries", type=int, default=3000, help="queries per shape")
+    parser.add_argument("--epochs", type=int, default=12)
+    parser.add_argument("--batch", type=int, default=512)
+    parser.add_argument("--lr", type=float, default=2e-3)
+    parser.add_argument("--parent-radius", type=float, default=0.024)
+    parser.add_argument("--rho-min", type=float, default=0.5)
+    parser.add_argument("--rho-max", type=float, default=1.0)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args(argv)
+    started = time.time()
+    predict = backbone_predictor("cpu")
+    # error curves belong to one backbone: key the cache by its weights
+    digest = hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest()[:12]
+    args.cache_dir = str(Path(args.cache_dir) / f"backbone_{digest}")
+    data = load_training_set(args, predict)
+    cached = time.time()
+    print(f"{len(data['udf'])} training queries cached in {cached - started:.0f} s", flush=True)
+    model = train(args, data)
+    trained = time.time()
+    selector = NumpySelector({k: v.detach().numpy() for k, v in model.state_dict().items()},
+                             model.config)
+    metrics = evaluate(args, predict, selector)
+    meta = {"args": vars(args), "training_queries": int(len(data["udf"])),
+            "seconds": {"cache": cached - started, "train": trained - cached,
+                        "evaluate": time.time() - trained},
+            "held_out_mean_abs_udf_error": metrics}
+    save_weights(model, args.out, meta)
+    Path(args.out).with_suffix(".json").write_text(json.dumps(meta, indent=2))
+    print(json.dumps(meta, indent=2))
+
+
+if __name__ == "__main__":
+    main()
