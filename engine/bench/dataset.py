@@ -1,0 +1,204 @@
+"""The benchmark's data: seeded procedural shapes per domain, scan conditions, real meshes.
+
+A test set is a list of seeds. ``make_shape(domain, seed)`` gives the exact ground-truth mesh in
+the unit frame; ``make_input(gt, domain, condition, seed)`` gives the input cloud in the same
+frame. Test and train seeds never overlap. Sampling, acceptance and noise draw from separate
+random streams (``default_rng([seed, k])``), so e.g. the noisy input is the clean input plus noise.
+"""
+
+import os
+from dataclasses import dataclass
+from typing import Dict, List, Tuple
+
+import numpy as np
+
+from ..frame import UnitFrame
+from ..geometry import Mesh, PointCloud
+from ..sampling import sample_surface
+from .scan import virtual_scan
+from .shapes.cars import make_car
+from .shapes.garments import make_garment
+from .shapes.rooms import build_room, room_layout
+
+DOMAINS = ("cars", "garments", "rooms")
+
+REAL_SHAPES = ("cgal/bunny00.off", "cgal/fandisk.off", "cgal/mushroom.off", "cgal/horizons.off",
+               "cgal/elephant-with-holes.off", "cgal/ChineseDragon-10kv.off", "scans/owl.ply",
+               "scans/plasticVase.ply", "rangemap/face000.ply", "misc/airplane.ply")
+"""Paths under ``<shared>/data/real`` of the real meshes used as out-of-domain checks."""
+
+_TEST_SEED_BASE = 1_000_000
+_STREAM_SAMPLE, _STREAM_SCAN, _STREAM_NOISE, _STREAM_OUTLIER = 1, 2, 3, 4
+
+
+@dataclass(frozen=True)
+class ScanCondition:
+    """How an input cloud is made from a ground-truth surface (lengths in the unit frame).
+
+    count: points in the cloud; noise_sigma: std of isotropic Gaussian noise added to every point;
+    outlier_fraction: share of points displaced by N(0, outlier_sigma) per axis and clamped to
+    [-outlier_clamp, outlier_clamp].
+    """
+
+    name: str
+    count: int
+    noise_sigma: float = 0.0
+    outlier_fraction: float = 0.0
+    outlier_sigma: float = 0.1
+    outlier_clamp: float = 0.52
+
+
+CONDITIONS: Dict[str, ScanCondition] = {
+    "clean": ScanCondition("clean", 50_000),
+    "sparse": ScanCondition("sparse", 10_000),
+    "noisy": ScanCondition("noisy", 50_000, noise_sigma=0.0025),
+    "outliers": ScanCondition("outliers", 50_000, outlier_fraction=0.1),
+}
+
+
+def _check_domain(domain: str) -> None:
+    if domain not in DOMAINS:
+        raise ValueError(f"unknown domain {domain!r}; choose one of {', '.join(DOMAINS)}")
+
+
+def test_seeds(domain: str, count: int = 100) -> List[int]:
+    """Seeds of the test shapes of ``domain``: 1 000 000 + i, never a train seed."""
+    _check_domain(domain)
+    return [_TEST_SEED_BASE + i for i in range(count)]
+
+
+def train_seeds(domain: str, count: int = 40) -> List[int]:
+    """Seeds of the training shapes of ``domain``: 0 .. count-1 (at most 1 000 000)."""
+    _check_domain(domain)
+    if count > _TEST_SEED_BASE:
+        raise ValueError(f"at most {_TEST_SEED_BASE} train seeds")
+    return list(range(count))
+
+
+def to_unit_frame(mesh: Mesh) -> Mesh:
+    """The mesh moved and scaled so its vertices' bounding box is centred with longest side 1."""
+    frame = UnitFrame.from_points(mesh.vertices)
+    return Mesh(frame.to_unit(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64),
+                mesh.normals, mesh.colors)
+
+
+def make_shape(domain: str, seed: int) -> Mesh:
+    """The exact ground-truth mesh of one procedural shape, in the unit frame.
+
+    Returns
+    -------
+    Mesh
+        vertices (V, 3) float64 in [-0.5, 0.5] (longest side exactly 1), faces (F, 3) int64;
+        cars: closed overlapping parts; garments: open tubes and layers; rooms: one-sided sheets
+        and furniture, z up.
+    """
+    _check_domain(domain)
+    if domain == "cars":
+        vertices, faces = make_car(seed)
+    elif domain == "garments":
+        vertices, faces = make_garment(seed)
+    else:
+        vertices, faces = build_room(room_layout(seed))
+    return to_unit_frame(Mesh(vertices, faces))
+
+
+def room_viewpoints(seed: int) -> np.ndarray:
+    """The scanner positions (K, 3) of room ``seed``, in the unit frame of ``make_shape``.
+
+    The room's bounding box is [0, Lx] x [0, Ly] x [0, H] by construction, so the frame is known
+    from the layout without building the mesh.
+    """
+    layout = room_layout(seed)
+    size = np.asarray(layout.size)
+    return (layout.viewpoints - size / 2) / size.max()
+
+
+def make_input(gt: Mesh, domain: str, condition: str, seed: int) -> PointCloud:
+    """The input cloud for ``gt`` (from ``make_shape(domain, seed)``) under ``condition``.
+
+    Cars and garments: ``count`` area-uniform samples. Rooms: a virtual scan from the room's
+    2-4 scanner positions (density falls off with distance, occluded parts are missing). Then
+    Gaussian noise or outliers as the condition says.
+
+    Returns
+    -------
+    PointCloud
+        points (count, 3) float64 in the unit frame; normals (count, 3) float64, the normal of the
+        face each point was sampled on (before noise; meaningless for outliers).
+    """
+    _check_domain(domain)
+    spec = CONDITIONS[condition]
+    if domain == "rooms":
+        rng = np.random.default_rng([seed, _STREAM_SCAN])
+        points, normals = virtual_scan(gt, spec.count, rng, viewpoints=room_viewpoints(seed))
+    else:
+        rng = np.random.default_rng([seed, _STREAM_SAMPLE])
+        points, normals, _ = sample_surface(gt.vertices, gt.faces, spec.count, rng)
+    points = points.copy()
+    if spec.noise_sigma > 0:
+        noise = np.random.default_rng([seed, _STREAM_NOISE])
+        points += noise.normal(0.0, spec.noise_sigma, points.shape)
+    if spec.outlier_fraction > 0:
+        rng = np.random.default_rng([seed, _STREAM_OUTLIER])
+        how_many = int(round(spec.outlier_fraction * len(points)))
+        chosen = rng.choice(len(points), how_many, replace=False)
+        moved = points[chosen] + rng.normal(0.0, spec.outlier_sigma, (len(chosen), 3))
+        points[chosen] = np.clip(moved, -spec.outlier_clamp, spec.outlier_clamp)
+    return PointCloud(points, normals)
+
+
+def crop_to_input(mesh: Mesh, points: np.ndarray, max_dist: float = 0.01) -> Mesh:
+    """The faces of ``mesh`` that the input saw: the scored ground truth for scanned rooms.
+
+    A face is kept when any of its corners, edge midpoints or centroid lies within ``max_dist``
+    (unit frame) of an input point, as the CAP-UDF / ScanNet protocols drop ground truth far from
+    the scan. Faces are not split, so the crop is as fine as the mesh (rooms: 8 cm cells, i.e.
+    0.013-0.023 in the unit frame). Unused vertices are dropped.
+
+    Parameters
+    ----------
+    mesh : the full ground truth
+    points : (N, 3) the input cloud, same frame
+    max_dist : distance threshold, same units
+
+    Returns
+    -------
+    Mesh with a subset of the faces; vertices (V', 3), faces (F', 3) int64
+    """
+    from scipy.spatial import cKDTree
+
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    probes = np.stack([a, b, c, (a + b) / 2, (b + c) / 2, (c + a) / 2, (a + b + c) / 3], 1)
+    tree = cKDTree(np.asarray(points))
+    dist, _ = tree.query(probes.reshape(-1, 3), distance_upper_bound=max_dist)
+    keep = (dist.reshape(-1, 7) <= max_dist).any(axis=1)
+    used, inverse = np.unique(f[keep], return_inverse=True)
+    return Mesh(v[used], inverse.reshape(-1, 3).astype(np.int64))
+
+
+def shared_dir() -> str:
+    """The shared reference folder: ``$UDF_SHARED_DIR``, else ``shared`` beside the repository."""
+    override = os.environ.get("UDF_SHARED_DIR")
+    if override:
+        return override
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    return os.path.join(os.path.dirname(repo), "shared")
+
+
+def real_shapes() -> List[Tuple[str, Mesh]]:
+    """The real meshes of ``REAL_SHAPES`` as (name, mesh in the unit frame), in that order.
+
+    Raises ``FileNotFoundError`` naming the folder when the shared data is missing.
+    """
+    from ..io import read_mesh
+
+    root = os.path.join(shared_dir(), "data", "real")
+    if not os.path.isdir(root):
+        raise FileNotFoundError(f"real meshes not found in {root}; set UDF_SHARED_DIR")
+    shapes = []
+    for rel in REAL_SHAPES:
+        mesh = read_mesh(os.path.join(root, rel))
+        name = os.path.splitext(os.path.basename(rel))[0]
+        shapes.append((name, to_unit_frame(Mesh(mesh.vertices, mesh.faces))))
+    return shapes

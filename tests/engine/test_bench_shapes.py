@@ -1,0 +1,179 @@
+"""The benchmark's procedural shapes, virtual scanner and scan conditions."""
+
+import os
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from engine.bench import dataset
+from engine.bench.dataset import (CONDITIONS, DOMAINS, crop_to_input, make_input, make_shape,
+                                  room_viewpoints, train_seeds)
+from engine.bench.dataset import test_seeds as held_out_seeds
+from engine.bench.scan import virtual_scan
+from engine.bench.shapes.rooms import room_layout
+from engine.sampling import face_areas_and_normals
+
+
+def _edges(faces):
+    """Unique undirected edges (E, 2) and how many faces use each (E,)."""
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    base = int(faces.max()) + 1
+    keys, uses = np.unique(e[:, 0] * base + e[:, 1], return_counts=True)
+    return np.stack([keys // base, keys % base], axis=1), uses
+
+
+def _components(count, edges):
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(count, count))
+    return connected_components(graph, directed=False)
+
+
+def _boundary_loops(mesh):
+    edges, uses = _edges(mesh.faces)
+    boundary = edges[uses == 1]
+    if len(boundary) == 0:
+        return 0
+    _, labels = _components(len(mesh.vertices), boundary)
+    return len(np.unique(labels[np.unique(boundary)]))
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_same_seed_gives_identical_shape(domain):
+    seed = held_out_seeds(domain)[3]
+    a, b = make_shape(domain, seed), make_shape(domain, seed)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_shapes_are_in_the_unit_frame_with_bounded_face_count(domain):
+    for seed in held_out_seeds(domain, 5):
+        mesh = make_shape(domain, seed)
+        low, high = mesh.vertices.min(0), mesh.vertices.max(0)
+        assert abs((high - low).max() - 1.0) < 1e-9
+        assert np.abs((low + high) / 2).max() < 1e-9
+        assert 5_000 <= len(mesh.faces) <= 60_000
+        assert mesh.faces.dtype == np.int64 and mesh.vertices.dtype == np.float64
+
+
+def test_garments_are_open_with_at_least_two_boundary_loops():
+    for seed in held_out_seeds("garments", 10):
+        assert _boundary_loops(make_shape("garments", seed)) >= 2
+
+
+def test_cars_are_closed_parts_with_many_components():
+    for seed in held_out_seeds("cars", 5):
+        mesh = make_shape("cars", seed)
+        edges, uses = _edges(mesh.faces)
+        assert (uses == 2).all()  # every part closed and manifold
+        parts, _ = _components(len(mesh.vertices), edges)
+        assert parts >= 8
+
+
+def test_train_and_test_seeds_are_disjoint():
+    for domain in DOMAINS:
+        assert len(held_out_seeds(domain)) == 100 and len(train_seeds(domain)) == 40
+        assert not set(held_out_seeds(domain)) & set(train_seeds(domain, 100_000))
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_twenty_test_shapes_all_differ(domain):
+    signatures = []
+    for seed in held_out_seeds(domain, 20):
+        mesh = make_shape(domain, seed)
+        extent = np.ptp(mesh.vertices, axis=0)
+        area = face_areas_and_normals(mesh.vertices, mesh.faces)[0].sum()
+        signatures.append(np.concatenate([extent, [area]]))
+    signatures = np.array(signatures)
+    gaps = np.linalg.norm(signatures[:, None] - signatures[None], axis=2)
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() > 1e-3
+
+
+def _room_with_cabinet():
+    for seed in held_out_seeds("rooms"):
+        if any(item.kind == "cabinet" for item in room_layout(seed).items):
+            return seed
+    raise AssertionError("no test room has a cabinet")
+
+
+@pytest.fixture(scope="module")
+def scanned_room():
+    seed = _room_with_cabinet()
+    gt = make_shape("rooms", seed)
+    return seed, gt, make_input(gt, "rooms", "clean", seed)
+
+
+def test_room_scan_has_the_count_and_varying_density(scanned_room):
+    _, _, cloud = scanned_room
+    assert cloud.points.shape == (CONDITIONS["clean"].count, 3)
+    knn = cKDTree(cloud.points).query(cloud.points, 9)[0][:, 8]
+    assert np.percentile(knn, 95) / np.percentile(knn, 5) > 2.0
+
+
+def test_room_scan_misses_the_floor_under_a_cabinet(scanned_room):
+    seed, gt, cloud = scanned_room
+    layout = room_layout(seed)
+    size = np.asarray(layout.size)
+    metres = cloud.points * size.max() + size / 2  # back to the layout's frame
+    on_floor = metres[metres[:, 2] < 0.005]
+    assert len(on_floor) > 1000  # the open floor is seen
+    for item in (i for i in layout.items if i.kind == "cabinet"):
+        c, s = np.cos(item.yaw), np.sin(item.yaw)
+        dx, dy = on_floor[:, 0] - item.x, on_floor[:, 1] - item.y
+        local_x, local_y = c * dx + s * dy, -s * dx + c * dy
+        under = (np.abs(local_x) < 0.35 * item.size[0]) & (np.abs(local_y) < 0.35 * item.size[1])
+        assert under.sum() == 0
+
+
+def test_room_viewpoints_are_inside_the_room():
+    for seed in held_out_seeds("rooms", 10):
+        views = room_viewpoints(seed)
+        assert 2 <= len(views) <= 4 and (np.abs(views) < 0.5).all()
+
+
+def test_crop_keeps_only_faces_near_the_scan(scanned_room):
+    _, gt, cloud = scanned_room
+    crop = crop_to_input(gt, cloud.points, 0.01)
+    assert 0 < len(crop.faces) < len(gt.faces)
+    centroids = crop.vertices[crop.faces].mean(axis=1)
+    farthest = cKDTree(cloud.points).query(centroids)[0].max()
+    corners = crop.vertices[crop.faces]
+    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()
+    assert farthest <= 0.01 + edge
+
+
+def test_uneven_object_scan_is_deterministic_with_the_count():
+    car = make_shape("cars", held_out_seeds("cars")[0])
+    views = np.array([[1.0, 0.4, 0.3], [-0.8, -0.6, 0.5]])
+    a, na = virtual_scan(car, 5_000, np.random.default_rng(7), views, uneven=True)
+    b, _ = virtual_scan(car, 5_000, np.random.default_rng(7), views, uneven=True)
+    assert a.shape == (5_000, 3) and np.array_equal(a, b)
+    assert np.allclose(np.linalg.norm(na, axis=1), 1.0)
+
+
+@pytest.mark.parametrize("domain", ["cars", "garments"])
+def test_noise_and_outliers_match_their_conditions(domain):
+    seed = held_out_seeds(domain)[1]
+    gt = make_shape(domain, seed)
+    clean = make_input(gt, domain, "clean", seed).points
+    noisy = make_input(gt, domain, "noisy", seed).points
+    assert abs(np.std(noisy - clean) - 0.0025) < 0.0001
+    outliers = make_input(gt, domain, "outliers", seed).points
+    moved = np.linalg.norm(outliers - clean, axis=1) > 0
+    assert abs(moved.mean() - 0.10) < 0.002
+    assert np.abs(outliers).max() <= 0.52
+    assert len(make_input(gt, domain, "sparse", seed)) == 10_000
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(dataset.shared_dir(), "data", "real")),
+                    reason="shared real data not present")
+def test_real_shapes_load_in_the_unit_frame():
+    shapes = dataset.real_shapes()
+    assert [name for name, _ in shapes] == [
+        "bunny00", "fandisk", "mushroom", "horizons", "elephant-with-holes",
+        "ChineseDragon-10kv", "owl", "plasticVase", "face000", "airplane"]
+    for _, mesh in shapes:
+        extent = np.ptp(mesh.vertices, axis=0)
+        assert abs(extent.max() - 1.0) < 1e-9 and len(mesh.faces) > 0
