@@ -1,0 +1,1 @@
+"""Blender operators and the bpy <-> numpy bridge they share."""

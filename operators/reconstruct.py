@@ -1,0 +1,249 @@
+"""The Reconstruct and Cancel operators.
+
+One :class:`Job` runs the engine on numpy copies of the object's points. From the N-panel
+(``invoke``) it runs on a worker thread that never touches bpy, while a 0.1 s modal timer shows
+its progress and Esc or the Cancel button sets its stop flag; from scripts and ``blender -b``
+(``execute``) it runs to the end before returning. Either way the new object is made on the main
+thread only once the engine has finished, so a cancel or an error leaves the scene untouched.
+"""
+
+import threading
+import time
+import traceback
+
+import bpy
+
+from ..engine.errors import Cancelled, InputError
+from ..ui.properties import scene_settings, to_settings
+from . import bridge
+
+_job = None  # the running Job, if any: one reconstruction at a time
+
+
+class Job:
+    """One reconstruction of a copied point cloud; ``run`` never touches bpy."""
+
+    def __init__(self, source, cloud, settings):
+        self.source_name = source.name
+        self.matrix_world = source.matrix_world.copy()
+        self.cloud = cloud
+        self.settings = settings
+        self.stop = threading.Event()
+        self.fraction = 0.0
+        self.message = "Starting"
+        self.result = None
+        self.error = None
+        self.seconds = 0.0
+        self.thread = None
+        # Imported here, on the main thread, so a missing dependency shows up at once and
+        # enabling the extension never pays for the engine's imports.
+        from ..engine.reconstruct import reconstruct
+        self._reconstruct = reconstruct
+
+    def _progress(self, fraction: float, message: str) -> None:
+        self.fraction, self.message = float(fraction), message
+
+    def run(self) -> None:
+        start = time.perf_counter()
+        try:
+            self.result = self._reconstruct(self.cloud, self.settings,
+                                            progress=self._progress, cancel=self.stop.is_set)
+        except BaseException as error:  # handed to the main thread, which reports it
+            self.error = error
+        self.seconds = time.perf_counter() - start
+
+    def start_thread(self) -> None:
+        self.thread = threading.Thread(target=self.run, name="udf_reconstruction", daemon=True)
+        self.thread.start()
+
+    @property
+    def running(self) -> bool:
+        return self.thread is not None and self.thread.is_alive()
+
+
+def running_job():
+    """The reconstruction in progress (for the panel), or None."""
+    return _job
+
+
+def start_job(context) -> Job:
+    """Copy the active object's points and settings into a new Job (raises InputError)."""
+    global _job
+    source = context.view_layer.objects.active
+    settings = to_settings(scene_settings(context.scene))
+    cloud = bridge.read_point_cloud(context, source)
+    _job = Job(source, cloud, settings)
+    return _job
+
+
+def _missing_dependency(error: BaseException):
+    """The third-party package an import failed on, or None (our own bugs are not that)."""
+    name = getattr(error, "name", None)
+    own = __package__.rsplit(".", 1)[0]
+    if isinstance(error, ModuleNotFoundError) and name and not name.startswith(own):
+        return name.split(".")[0]
+    return None
+
+
+def _missing_package_message(name: str) -> str:
+    return (f"The Python package '{name}' is missing, so nothing can be reconstructed. "
+            f"Install the UDF Reconstruction zip built for your platform (it bundles its "
+            f"packages); Preferences > Add-ons > UDF Reconstruction lists what was found.")
+
+
+def _report_failure(operator, error: BaseException) -> set:
+    """Report an error that is not the user's input; print the traceback for bug reports."""
+    missing = _missing_dependency(error)
+    if missing:
+        operator.report({'ERROR'}, _missing_package_message(missing))
+    elif isinstance(error, MemoryError):
+        operator.report({'ERROR'}, "Ran out of memory. Lower the resolution and try again.")
+    else:
+        traceback.print_exception(type(error), error, error.__traceback__)
+        operator.report({'ERROR'}, f"Reconstruction failed ({type(error).__name__}: {error}). "
+                                   f"See the system console for details.")
+    return {'CANCELLED'}
+
+
+def finish_job(operator, context, job: Job) -> set:
+    """Report the job's outcome; on success add the mesh object. Returns the operator result."""
+    global _job
+    _job = None
+    error = job.error
+    if isinstance(error, Cancelled):
+        operator.report({'INFO'}, "Reconstruction cancelled; nothing was changed.")
+        return {'CANCELLED'}
+    if isinstance(error, InputError):
+        operator.report({'ERROR'}, str(error))
+        return {'CANCELLED'}
+    if error is not None:
+        return _report_failure(operator, error)
+
+    result = job.result
+    for message in result.messages:
+        operator.report({'WARNING'}, message)
+    if len(result.mesh.faces) == 0:
+        operator.report({'ERROR'}, "No surface was found. Try a larger radius or a lower "
+                                   "resolution.")
+        return {'CANCELLED'}
+    # Looked up by name: an undo while the job ran invalidates references to bpy data.
+    source = bpy.data.objects.get(job.source_name)
+    obj = bridge.new_mesh_object(context, result.mesh, f"{job.source_name}_mesh",
+                                 job.matrix_world, source)
+    operator.report({'INFO'}, f"Made '{obj.name}': {len(result.mesh.faces):,} faces from "
+                              f"{len(job.cloud):,} points in {job.seconds:.1f} s.")
+    return {'FINISHED'}
+
+
+def _redraw_panels(context) -> None:
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+
+
+class UDFR_OT_reconstruct(bpy.types.Operator):
+    """Build a mesh from the active point cloud with the settings of the Reconstruct panel"""
+
+    bl_idname = "udf_reconstruction.reconstruct"
+    bl_label = "Reconstruct"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.view_layer.objects.active
+        if _job is not None:
+            cls.poll_message_set("A reconstruction is already running; wait for it or cancel it")
+            return False
+        if obj is None:
+            cls.poll_message_set("Select a point cloud first (a mesh of vertices or a point "
+                                 "cloud object)")
+            return False
+        if obj.type not in bridge.POINT_TYPES:
+            cls.poll_message_set(f"'{obj.name}' is a {obj.type.lower()}, not a mesh or point "
+                                 f"cloud")
+            return False
+        if context.mode != 'OBJECT':
+            cls.poll_message_set("Switch to Object Mode first")
+            return False
+        if bridge.point_count(context, obj) == 0:
+            cls.poll_message_set(f"'{obj.name}' has no points")
+            return False
+        return True
+
+    def execute(self, context):
+        try:
+            job = start_job(context)
+        except InputError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        except ImportError as error:
+            return _report_failure(self, error)
+        job.run()
+        return finish_job(self, context, job)
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            job = start_job(context)
+        except InputError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        except ImportError as error:
+            return _report_failure(self, error)
+        job.start_thread()
+        self._timer = context.window_manager.event_timer_add(0.1, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        job = _job
+        if event.type == 'ESC' and event.value == 'PRESS':
+            job.stop.set()
+            return {'RUNNING_MODAL'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        _redraw_panels(context)
+        if job.running:
+            text = f"Reconstructing '{job.source_name}': {job.message} ({job.fraction:.0%})"
+            context.workspace.status_text_set(
+                text + (" - cancelling" if job.stop.is_set() else " - Esc to cancel"))
+            return {'PASS_THROUGH'}
+        self._stop_timer(context)
+        return finish_job(self, context, job)
+
+    def cancel(self, context):
+        # Blender ends the modal operator (file load, window closed): stop the worker too.
+        global _job
+        if _job is not None:
+            _job.stop.set()
+            _job = None
+        self._stop_timer(context)
+
+    def _stop_timer(self, context):
+        context.window_manager.event_timer_remove(self._timer)
+        context.workspace.status_text_set(None)
+        _redraw_panels(context)
+
+
+class UDFR_OT_cancel(bpy.types.Operator):
+    """Stop the running reconstruction; the scene stays as it was"""
+
+    bl_idname = "udf_reconstruction.cancel"
+    bl_label = "Cancel"
+    bl_options = {'INTERNAL'}
+
+    @classmethod
+    def poll(cls, context):
+        if _job is None:
+            cls.poll_message_set("No reconstruction is running")
+            return False
+        return True
+
+    def execute(self, context):
+        _job.stop.set()
+        return {'FINISHED'}
+
+
+CLASSES = (UDFR_OT_reconstruct, UDFR_OT_cancel)

@@ -1,0 +1,230 @@
+"""Reconstruct point-cloud files without the user interface.
+
+    blender -b --factory-startup --python-exit-code 1 --python scripts/batch_reconstruct.py -- \\
+        scans/*.ply more_scans/ --output meshes/ --resolution 192 --blend meshes/all.blend \\
+        --preview meshes/preview.png
+    .venv/bin/python scripts/batch_reconstruct.py scans/ --output meshes/      # the bpy module
+
+Each input file (folders are searched for readable files, not recursively) is reconstructed with
+the same settings the N-panel uses: the open .blend file's panel values (the defaults otherwise),
+overridden by the options given here. Meshes are written as ``OUTPUT/<name>.ply`` (``--format``
+picks OBJ or OFF), optionally also gathered into a .blend file and rendered into a PNG preview
+(Workbench, which works in background mode). Progress goes to stdout; the exit status is 0 when
+every input worked, 1 when some failed (each failure is printed with its reason), 2 for bad
+options.
+
+The extension is found in this order: an enabled extension (``--addons bl_ext.<repo>.
+udf_reconstruction``); an installed but disabled one (enabled for the run); else the folder this
+script lives in (a checkout or an installed copy), imported as the package ``udf_reconstruction``
+straight from its ``__init__.py``, so the checkout's folder name does not matter and ``sys.path``
+is left alone.
+"""
+
+import argparse
+import importlib
+import importlib.util
+import re
+import sys
+import time
+from dataclasses import fields
+from pathlib import Path
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+EXTENSION_ID = "udf_reconstruction"
+
+
+def load_extension():
+    """The extension's package module, registered."""
+    suffix = "." + EXTENSION_ID
+    for name, module in list(sys.modules.items()):
+        if name.startswith("bl_ext.") and name.endswith(suffix):
+            return module
+    import addon_utils
+    for module in addon_utils.modules():
+        if module.__name__.startswith("bl_ext.") and module.__name__.endswith(suffix):
+            return addon_utils.enable(module.__name__, default_set=False)
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location(
+        EXTENSION_ID, root / "__init__.py", submodule_search_locations=[str(root)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[EXTENSION_ID] = module
+    spec.loader.exec_module(module)
+    module.register()
+    return module
+
+
+def script_arguments() -> list:
+    """The arguments meant for this script: after ``--`` inside Blender, all of them otherwise."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return [] if bpy.app.binary_path else sys.argv[1:]  # the bpy module has no binary
+
+
+def build_parser(settings_type, radius_modes, devices, read_formats, write_formats):
+    parser = argparse.ArgumentParser(
+        prog="batch_reconstruct.py",
+        description="Reconstruct meshes from point-cloud files with UDF Reconstruction.")
+    parser.add_argument("inputs", nargs="+", metavar="INPUT",
+                        help=f"point-cloud files or folders of them "
+                             f"({', '.join(f.lower() for f in read_formats)})")
+    parser.add_argument("--output", "-o", required=True, metavar="DIR",
+                        help="folder for the meshes (created when missing)")
+    parser.add_argument("--format", default="ply", choices=[f.lower() for f in write_formats],
+                        help="mesh file format (default: ply)")
+    parser.add_argument("--blend", metavar="FILE", help="also save all meshes in this .blend")
+    parser.add_argument("--preview", metavar="PNG",
+                        help="also render the meshes into this PNG (one file per input, "
+                             "suffixed with its name, when there are several)")
+    group = parser.add_argument_group(
+        "reconstruction settings (default: the open file's panel values, else the panel's "
+        "defaults; lengths are fractions of each cloud's longest side)")
+    choices = {"radius_mode": radius_modes, "device": devices}
+    for field in fields(settings_type):
+        group.add_argument("--" + field.name.replace("_", "-"), dest=field.name, default=None,
+                           type=type(field.default), choices=choices.get(field.name),
+                           help=f"(panel default: {field.default})")
+    return parser
+
+
+def input_files(inputs, read_formats) -> list:
+    """The files to reconstruct: files as given, folders expanded to their readable files."""
+    extensions = {"." + f.lower() for f in read_formats}
+    files = []
+    for item in map(Path, inputs):
+        if item.is_dir():
+            files += sorted(p for p in item.iterdir() if p.suffix.lower() in extensions)
+        else:
+            files.append(item)
+    return files
+
+
+class ProgressPrinter:
+    """Prints a job's progress when it has moved on 10 % or entered a new stage."""
+
+    def __init__(self, prefix: str):
+        self.prefix, self.last_fraction, self.last_message = prefix, -1.0, None
+
+    def __call__(self, fraction: float, message: str) -> None:
+        stage = re.sub(r"[\d,./()]+", "", message)  # "optimising (4/200)" is one stage
+        if fraction - self.last_fraction >= 0.1 or stage != self.last_message:
+            print(f"{self.prefix} {fraction:4.0%} {message}", flush=True)
+            self.last_fraction, self.last_message = fraction, stage
+
+
+def render_preview(context, objects, path: Path) -> None:
+    """Render ``objects`` alone with Workbench from a three-quarter view into ``path``."""
+    scene = context.scene
+    hidden = [o for o in scene.objects if o not in objects and not o.hide_render]
+    for obj in hidden:
+        obj.hide_render = True
+    corners = np.array([tuple(o.matrix_world @ Vector(c)) for o in objects for c in o.bound_box])
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    center, size = Vector((low + high) / 2), float(np.max(high - low))
+
+    camera = bpy.data.objects.new("Preview Camera", bpy.data.cameras.new("Preview Camera"))
+    scene.collection.objects.link(camera)
+    camera.location = center + Vector((1.0, -1.3, 0.8)).normalized() * size * 2.2
+    camera.rotation_euler = (center - camera.location).to_track_quat('-Z', 'Y').to_euler()
+    camera.data.clip_end = size * 10
+    previous_camera, scene.camera = scene.camera, camera
+
+    scene.render.engine = 'BLENDER_WORKBENCH'
+    shading = scene.display.shading
+    colored = all(o.data.color_attributes for o in objects)
+    shading.color_type = 'VERTEX' if colored else 'SINGLE'
+    shading.light = 'STUDIO'
+    scene.render.resolution_x, scene.render.resolution_y = 960, 720
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = 'PNG'
+    scene.render.filepath = str(path)
+    try:
+        bpy.ops.render.render(write_still=True)
+    finally:
+        scene.camera = previous_camera
+        bpy.data.objects.remove(camera)
+        for obj in hidden:
+            obj.hide_render = False
+
+
+def main() -> int:
+    extension = load_extension()
+    package = extension.__name__
+    print(f"extension: {package} ({Path(extension.__file__).parent})", flush=True)
+    engine_io = importlib.import_module(package + ".engine.io")
+    errors = importlib.import_module(package + ".engine.errors")
+    settings_module = importlib.import_module(package + ".engine.settings")
+    properties = importlib.import_module(package + ".ui.properties")
+    bridge = importlib.import_module(package + ".operators.bridge")
+
+    parser = build_parser(settings_module.ReconstructSettings, settings_module.RADIUS_MODES,
+                          settings_module.DEVICES, engine_io.READ_FORMATS,
+                          engine_io.WRITE_FORMATS)
+    args = parser.parse_args(script_arguments())
+    files = input_files(args.inputs, engine_io.READ_FORMATS)
+    if not files:
+        parser.error("no readable point-cloud files in the inputs")
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+
+    if not bpy.data.filepath:
+        bpy.ops.wm.read_homefile(use_empty=True)  # no file given: start from an empty scene
+    context = bpy.context
+    values = properties.to_settings(properties.scene_settings(context.scene)).to_dict()
+    values.update({k: getattr(args, k) for k in values if getattr(args, k) is not None})
+    try:
+        settings = settings_module.ReconstructSettings.from_dict(values)
+    except errors.InputError as error:
+        parser.error(str(error))
+    print(f"settings: {settings.to_dict()}", flush=True)
+
+    reconstruct = importlib.import_module(package + ".engine.reconstruct").reconstruct
+
+    failed, used_names = [], set()
+    for index, path in enumerate(files, 1):
+        prefix = f"[{index}/{len(files)}] {path.name}:"
+        name = path.stem
+        while name in used_names:  # same file name in two folders
+            name += "_"
+        used_names.add(name)
+        try:
+            cloud = engine_io.read_point_cloud(path)
+            print(f"{prefix} {len(cloud):,} points", flush=True)
+            started = time.perf_counter()
+            result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix))
+            for message in result.messages:
+                print(f"{prefix} note: {message}", flush=True)
+            if len(result.mesh.faces) == 0:
+                raise errors.InputError("no surface was found; try a larger --radius or a "
+                                        "lower --resolution")
+            mesh_path = output / f"{name}.{args.format}"
+            engine_io.write_mesh(mesh_path, result.mesh)
+            print(f"{prefix} wrote {mesh_path} ({len(result.mesh.faces):,} faces, "
+                  f"{time.perf_counter() - started:.1f} s)", flush=True)
+        except (errors.InputError, OSError) as error:
+            print(f"{prefix} error: {error}", file=sys.stderr, flush=True)
+            failed.append(path)
+            continue
+        if args.blend or args.preview:
+            obj = bridge.new_mesh_object(context, result.mesh, name, Matrix.Identity(4))
+            if args.preview:
+                preview = Path(args.preview)
+                if len(files) > 1:
+                    preview = preview.with_name(f"{preview.stem}_{name}{preview.suffix}")
+                preview.parent.mkdir(parents=True, exist_ok=True)
+                render_preview(context, [obj], preview)
+                print(f"{prefix} rendered {preview}", flush=True)
+
+    if args.blend:
+        Path(args.blend).parent.mkdir(parents=True, exist_ok=True)
+        bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.blend).resolve()),
+                                    check_existing=False)
+        print(f"saved {args.blend}", flush=True)
+    print(f"done: {len(files) - len(failed)} of {len(files)} reconstructed", flush=True)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

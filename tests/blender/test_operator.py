@@ -1,0 +1,215 @@
+"""The Reconstruct operator on generated clouds: measured quality, placement, colours, refusals,
+undo and cancel."""
+
+import time
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Matrix
+
+
+RADIUS = 0.8          # of the generated sphere, local units
+SCALE = 1.5           # object scale: the world sphere has radius RADIUS * SCALE
+LOCATION = (1.0, -2.0, 0.5)
+RESOLUTION = 64
+
+
+def sphere_points(count: int, radius: float):
+    """(count, 3) points evenly spread on a sphere around the origin (Fibonacci lattice)."""
+    i = np.arange(count) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / count)
+    azimuth = np.pi * (1.0 + 5.0 ** 0.5) * i
+    return radius * np.c_[np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
+                          np.cos(polar)]
+
+
+def add_cloud(name: str, points, colors=None):
+    """A vertex-only mesh object holding ``points`` (and a ``Col`` point colour), made active."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(points))
+    mesh.attributes["position"].data.foreach_set(
+        "vector", np.asarray(points, dtype=np.float32).ravel())
+    if colors is not None:
+        attribute = mesh.color_attributes.new("Col", 'FLOAT_COLOR', 'POINT')
+        attribute.data.foreach_set("color", np.asarray(colors, dtype=np.float32).ravel())
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj
+
+
+def colors_at(points):
+    """RGBA colours that vary smoothly over the sphere, so carried colours can be checked."""
+    rgb = np.clip(0.5 + 0.5 * points / RADIUS, 0.0, 1.0)
+    return np.c_[rgb, np.ones(len(points))]
+
+
+def world_vertices(obj):
+    count = len(obj.data.vertices)
+    local = np.empty(count * 3, dtype=np.float32)
+    obj.data.attributes["position"].data.foreach_get("vector", local)
+    matrix = np.array(obj.matrix_world)
+    return local.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+class Reports:
+    """Stands in for an operator's ``report`` when a job is finished by hand."""
+
+    def __init__(self):
+        self.messages = []
+
+    def report(self, kind, message):
+        self.messages.append((set(kind), message))
+
+
+@pytest.fixture(scope="module")
+def sphere_result(extension):
+    """A transformed, coloured 10k-point sphere cloud and what Reconstruct made of it."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.udf_reconstruction.resolution = RESOLUTION
+    points = sphere_points(10_000, RADIUS)
+    source = add_cloud("Scan", points, colors_at(points))
+    source.matrix_world = (Matrix.Translation(LOCATION)
+                           @ Matrix.Rotation(0.4, 4, 'X') @ Matrix.Rotation(0.3, 4, 'Z')
+                           @ Matrix.Scale(SCALE, 4))
+    before = set(bpy.data.objects)
+    started = time.perf_counter()
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    seconds = time.perf_counter() - started
+    (result,) = set(bpy.data.objects) - before
+    return source, result, points, seconds
+
+
+def test_mesh_lies_on_the_true_sphere_and_covers_it(sphere_result):
+    from scipy.spatial import cKDTree
+
+    source, result, points, seconds = sphere_result
+    vertices = world_vertices(result)
+    diameter = 2 * RADIUS * SCALE
+    error = np.abs(np.linalg.norm(vertices - np.array(LOCATION), axis=1) - RADIUS * SCALE)
+    print(f"sphere: {len(result.data.polygons)} faces in {seconds:.1f} s, distance to the true "
+          f"surface mean {error.mean() / diameter:.2e} max {error.max() / diameter:.2e} "
+          f"(fractions of the diameter)")
+    assert len(result.data.polygons) > 5000
+    assert error.mean() < 0.002 * diameter
+    assert np.percentile(error, 99) < 0.01 * diameter
+    # No holes: every input point has a mesh vertex within two grid cells.
+    matrix = np.array(source.matrix_world)
+    world_points = points @ matrix[:3, :3].T + matrix[:3, 3]
+    gap, _ = cKDTree(vertices).query(world_points)
+    assert gap.max() < 2 * diameter / RESOLUTION
+    assert not result.data.validate(verbose=False), "the written mesh must be valid as is"
+
+
+def test_result_sits_on_the_source_selected_and_active(sphere_result):
+    source, result, _, _ = sphere_result
+    assert result.name == "Scan_mesh"
+    assert result.type == 'MESH'
+    assert np.allclose(np.array(result.matrix_world), np.array(source.matrix_world), atol=0)
+    assert bpy.context.view_layer.objects.active == result
+    assert list(bpy.context.view_layer.objects.selected) == [result]
+    assert list(result.users_collection) == list(source.users_collection)
+
+
+def test_point_colours_are_carried_to_the_mesh(sphere_result):
+    _, result, _, _ = sphere_result
+    attribute = result.data.color_attributes["Col"]
+    assert attribute.domain == 'POINT'
+    colors = np.empty(len(result.data.vertices) * 4, dtype=np.float32)
+    attribute.data.foreach_get("color", colors)
+    local = np.empty(len(result.data.vertices) * 3, dtype=np.float32)
+    result.data.attributes["position"].data.foreach_get("vector", local)
+    expected = colors_at(local.reshape(-1, 3))
+    assert np.abs(colors.reshape(-1, 4) - expected).mean() < 0.03
+
+
+@pytest.mark.parametrize("kind", ["camera", "empty mesh", "no object"])
+def test_objects_without_points_are_refused_by_poll(scene, kind):
+    if kind == "camera":
+        obj = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+        scene.collection.objects.link(obj)
+        expected = "'Cam' is a camera, not a mesh or point cloud"
+    elif kind == "empty mesh":
+        obj = bpy.data.objects.new("Empty", bpy.data.meshes.new("Empty"))
+        scene.collection.objects.link(obj)
+        expected = "'Empty' has no points"
+    else:
+        obj = None
+        expected = "Select a point cloud first"
+    bpy.context.view_layer.objects.active = obj
+    assert not bpy.ops.udf_reconstruction.reconstruct.poll()
+    with pytest.raises(RuntimeError, match=expected):
+        bpy.ops.udf_reconstruction.reconstruct()
+
+
+def test_three_points_are_refused_with_the_engines_message(scene):
+    add_cloud("Three", np.eye(3))
+    before = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="(?i)points"):
+        bpy.ops.udf_reconstruction.reconstruct()
+    assert len(bpy.data.objects) == before
+
+
+def test_radius_modes_not_built_yet_are_refused_with_what_to_use(scene, extension):
+    missing = set(extension.module("engine.settings").RADIUS_MODES) \
+        - extension.module("ui.properties").available_radius_modes()
+    if not missing:
+        pytest.skip("every radius mode is built")
+    add_cloud("Sphere", sphere_points(2000, 1.0))
+    scene.udf_reconstruction.radius_mode = sorted(missing)[0]
+    before = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="not available yet; use one of: fixed"):
+        bpy.ops.udf_reconstruction.reconstruct()
+    assert len(bpy.data.objects) == before
+
+
+def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
+    reconstruct = extension.module("operators.reconstruct")
+    engine_errors = extension.module("engine.errors")
+    add_cloud("Sphere", sphere_points(20_000, 1.0))
+    scene.udf_reconstruction.resolution = 128
+    before = set(bpy.data.objects)
+
+    job = reconstruct.start_job(bpy.context)  # exactly what invoke() does
+    job.start_thread()
+    deadline = time.perf_counter() + 30
+    while job.fraction == 0.0 and job.running and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    assert job.running, "the job ended before it could be cancelled"
+    assert reconstruct.running_job() is job
+    assert not bpy.ops.udf_reconstruction.reconstruct.poll(), "one job at a time"
+
+    asked = time.perf_counter()
+    assert bpy.ops.udf_reconstruction.cancel() == {'FINISHED'}  # the panel's Cancel button
+    job.thread.join(timeout=10)
+    stopped_after = time.perf_counter() - asked
+    assert not job.running
+    assert stopped_after < 3.0, f"cancelling took {stopped_after:.1f} s"
+    assert isinstance(job.error, engine_errors.Cancelled)
+
+    reports = Reports()
+    assert reconstruct.finish_job(reports, bpy.context, job) == {'CANCELLED'}
+    assert reports.messages == [({'INFO'}, "Reconstruction cancelled; nothing was changed.")]
+    assert set(bpy.data.objects) == before
+    assert reconstruct.running_job() is None
+
+
+def test_undo_removes_the_result(scene):
+    windows = bpy.context.window_manager.windows
+    if not len(windows):
+        pytest.skip("no undo stack without a window (bpy module, blender -b); "
+                    "`make test-blender-gui` runs this")
+    add_cloud("Sphere", sphere_points(3000, 1.0))
+    scene.udf_reconstruction.resolution = 32
+    with bpy.context.temp_override(window=windows[0]):
+        bpy.ops.ed.undo_push(message="cloud added")
+        # undo=True: push an undo step as a click on the button does (bpy.ops calls do not)
+        assert bpy.ops.udf_reconstruction.reconstruct('EXEC_DEFAULT', True) == {'FINISHED'}
+        assert "Sphere_mesh" in bpy.data.objects
+        bpy.ops.ed.undo()
+    assert "Sphere_mesh" not in bpy.data.objects
+    assert "Sphere" in bpy.data.objects

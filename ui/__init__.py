@@ -1,0 +1,1 @@
+"""Blender user interface: scene settings, the N-panel and the preferences."""
