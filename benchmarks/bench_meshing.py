@@ -1,0 +1,59 @@
+"""Seconds per stage and peak memory of the DCUDF mesher on a sphere and an open disk.
+
+    python benchmarks/bench_meshing.py [--res 128 256 512] [--iterations N]
+
+Fields: sphere of radius 0.5 and flat disk of radius 0.5 (z = 0, midway between node layers)
+in [-1, 1]^3, dense grids (the grid interpolation path, as with a network's output). Peak memory
+is the process's ru_maxrss after each run (a high-water mark: it never goes down), so run one
+resolution per process for exact figures; tracemalloc's numpy peak is printed too.
+"""
+
+import argparse
+import os
+import resource
+import sys
+import time
+import tracemalloc
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from engine.meshing import MeshingSettings, extract_surface  # noqa: E402
+from engine.meshing import analytic as A  # noqa: E402
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--res", type=int, nargs="+", default=[128, 256, 512])
+    parser.add_argument("--shapes", nargs="+", default=["sphere", "disk"])
+    parser.add_argument("--iterations", type=int, default=None)
+    args = parser.parse_args()
+    shapes = {"sphere": A.sphere((0, 0, 0), 0.5), "disk": A.disk((0, 0, 0), 0.5)}
+    header = (f"{'shape':7s} {'res':>4s} {'cover F':>9s} {'out F':>8s} {'grid s':>7s} "
+              f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'cut s':>6s} {'clean s':>7s} "
+              f"{'total s':>8s} {'py peak MB':>10s} {'RSS MB':>7s} status")
+    print(header, flush=True)
+    for res in args.res:
+        for name in args.shapes:
+            start = time.perf_counter()
+            grid = A.sample_grid(shapes[name], [-1] * 3, [1] * 3, res, exact=False)
+            grid_s = time.perf_counter() - start
+            settings = MeshingSettings()
+            if args.iterations is not None:
+                settings.iterations = args.iterations
+            tracemalloc.start()
+            result = extract_surface(grid, settings)
+            _, peak = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
+            t = result.timings
+            rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            status = ",".join(sorted({r.status.value for r in result.components}))
+            print(f"{name:7s} {res:4d} {int(result.stats['cover_faces']):9d} "
+                  f"{len(result.mesh.faces):8d} {grid_s:7.1f} {t['marching_cubes']:6.2f} "
+                  f"{t.get('field', 0):7.2f} {t['optimize']:7.1f} {t['cut']:6.2f} "
+                  f"{t['cleanup']:7.2f} {sum(t.values()):8.1f} {peak / 2**20:10.0f} "
+                  f"{rss:7.0f} {status}", flush=True)
+            del grid, result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,178 @@
+"""Entry point of the mesher: a UDF grid in, a one-layer triangle mesh out (DCUDF).
+
+Stages: marching cubes at a small iso-value r (the double cover) → covering-map optimisation
+onto the zero set → min-cut into one layer per piece → clean-up. See the modules of this package
+for each stage.
+"""
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from ..errors import InputError
+from ..geometry import Mesh
+from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+from .cleanup import clean_mesh
+from .cut import ComponentRecord, Status, split_cover
+from .grid_field import UDFGrid
+from .marching import double_cover
+from .optimize import optimize_cover
+
+DEVICES = ("auto", "cpu", "cuda")
+
+
+@dataclass
+class MeshingSettings:
+    """How to mesh a UDF grid. Lengths in voxels unless said otherwise.
+
+    iso: the marching-cubes level r in world units; None picks ``max(1 voxel, min(d) + 0.5
+        voxel)`` and raises it (up to 2 voxels) while the cover fragments.
+    iterations: optimisation iterations (both stages).
+    laplacian_weight: smoothing weight of stage 1, voxel units (DCUDF's weight times the voxel
+        size; DCUDF's 2000 at 256^3 over [-1, 1] is about 16: lower keeps more detail of a clean
+        field, higher resists noise).
+    lr: peak step of VectorAdam, voxels per iteration.
+    normal_start: fraction of the iterations after which stage 2 (normal-constrained) starts.
+    cut: split the double cover into one layer (False keeps both layers).
+    min_component_faces: drop output pieces with fewer faces (0 keeps everything).
+    seed: seeds the min-cut's seed faces.
+    device: ``auto``, ``cpu`` or ``cuda``; the optimisation runs in numpy on the CPU (a CUDA
+        request is reported in the messages).
+    """
+
+    iso: Optional[float] = None
+    iterations: int = 200
+    laplacian_weight: float = 4.0
+    lr: float = 0.05
+    normal_start: float = 0.75
+    cut: bool = True
+    min_component_faces: int = 0
+    seed: int = 0
+    device: str = "auto"
+
+    def validate(self) -> "MeshingSettings":
+        """Raise :class:`InputError` when a setting is out of range."""
+        if self.iso is not None and not (np.isfinite(self.iso) and self.iso > 0):
+            raise InputError(f"iso must be a positive number, got {self.iso}")
+        if not 0 <= int(self.iterations) <= 10000:
+            raise InputError(f"iterations must be in [0, 10000], got {self.iterations}")
+        if not self.laplacian_weight >= 0:
+            raise InputError("laplacian_weight must be >= 0")
+        if not 0 < self.lr <= 1:
+            raise InputError(f"lr must be in (0, 1] voxels per iteration, got {self.lr}")
+        if not 0 <= self.normal_start <= 1:
+            raise InputError("normal_start must be in [0, 1]")
+        if self.min_component_faces < 0:
+            raise InputError("min_component_faces must be >= 0")
+        if self.device not in DEVICES:
+            raise InputError(f"device must be one of {', '.join(DEVICES)}, not {self.device!r}")
+        return self
+
+
+@dataclass
+class MeshingResult:
+    """The mesh and what happened on the way.
+
+    mesh: the one-layer mesh (world units); components: one record per piece of the cover
+    (status, faces kept, cover faces, detail), largest first; iso: the level used (world units);
+    timings: seconds per stage; messages: warnings meant for the user; stats: numbers for logs.
+    """
+
+    mesh: Mesh
+    components: List[ComponentRecord]
+    iso: float
+    timings: Dict[str, float] = field(default_factory=dict)
+    messages: List[str] = field(default_factory=list)
+    stats: Dict[str, float] = field(default_factory=dict)
+
+
+def _summary(records: List[ComponentRecord]) -> List[str]:
+    messages = []
+    bad = [r for r in records if r.status == Status.NOT_ORIENTABLE]
+    if bad:
+        messages.append(f"{len(bad)} component{'s' if len(bad) > 1 else ''} could not be split "
+                        "into one layer (not orientable or non-manifold); kept double-layered")
+    failed = [r for r in records if r.status == Status.FAILED]
+    if failed:
+        messages.append(f"{len(failed)} component{'s' if len(failed) > 1 else ''} could not be "
+                        f"processed ({failed[0].detail}); kept as extracted")
+    return messages
+
+
+def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
+                    progress: Optional[ProgressFn] = None,
+                    cancel: Optional[CancelFn] = None) -> MeshingResult:
+    """Mesh the zero level set of an unsigned distance grid.
+
+    Parameters
+    ----------
+    field : UDFGrid
+        Dense or band grid, world units (optionally with an exact closest-point callable).
+    settings : MeshingSettings, optional
+    progress : callable ``(fraction, message)``, optional
+    cancel : callable ``() -> bool``, optional; checked at least every few iterations.
+
+    Returns
+    -------
+    MeshingResult
+    """
+    settings = (settings or MeshingSettings()).validate()
+    progress = progress or no_progress
+    if not isinstance(field, UDFGrid):
+        raise InputError("extract_surface needs a UDFGrid")
+    h = field.spacing
+    timings: Dict[str, float] = {}
+    messages: List[str] = []
+    if settings.device == "cuda":
+        messages.append("the mesher runs on the CPU (numpy); CUDA was not used")
+
+    start = time.perf_counter()
+    verts, faces, iso, report, notes = double_cover(
+        field, settings.iso, sub_progress(progress, 0.0, 0.05), cancel)
+    messages += notes
+    timings["marching_cubes"] = time.perf_counter() - start
+    stats = {"iso_voxels": iso / h, "cover_vertices": len(verts), "cover_faces": len(faces),
+             "cover_pieces": report.components}
+    if len(faces) == 0:
+        return MeshingResult(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), [], iso,
+                             timings, messages + ["no surface found"], stats)
+
+    start = time.perf_counter()
+    check_cancel(cancel)
+    if field.exact is None:
+        bricks = field.prepare(iso + 3.0 * h)
+        stats["field_bricks"] = bricks
+    timings["field"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    verts, opt = optimize_cover(verts, faces, field, settings.iterations,
+                                settings.laplacian_weight, settings.lr, settings.normal_start,
+                                sub_progress(progress, 0.05, 0.9), cancel)
+    timings["optimize"] = time.perf_counter() - start
+    stats.update({"mean_distance_voxels": opt.mean_distance,
+                  "max_distance_voxels": opt.max_distance})
+
+    start = time.perf_counter()
+    keep, records = split_cover(verts, faces, h, settings.cut, settings.seed,
+                                sub_progress(progress, 0.9, 0.97), cancel)
+    timings["cut"] = time.perf_counter() - start
+    messages += _summary(records)
+
+    start = time.perf_counter()
+    check_cancel(cancel)
+    out_v, out_f, counts = clean_mesh(verts, faces[keep], h, settings.min_component_faces)
+    timings["cleanup"] = time.perf_counter() - start
+    stats.update({f"cleanup_{k}": v for k, v in counts.items()})
+    if counts["small_pieces"]:
+        messages.append(f"{counts['small_pieces']} pieces with fewer than "
+                        f"{settings.min_component_faces} faces were removed")
+    progress(1.0, "meshing done")
+    return MeshingResult(Mesh(out_v, out_f.astype(np.int64)), records, iso, timings, messages,
+                         stats)
+
+
+def settings_dict(settings: MeshingSettings) -> dict:
+    """The settings as a plain dict (for logs and the CLI)."""
+    return asdict(settings)

@@ -1,0 +1,206 @@
+"""End to end on analytic fields: distance to the true surface, pieces, loops, manifoldness."""
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from engine.errors import Cancelled
+from engine.meshing import MeshingSettings, UDFGrid, extract_surface
+from engine.meshing import analytic as A
+from engine.meshing import mesh_ops as mo
+from engine.meshing.cut import Status
+
+RES = 64
+H = 1.0 / (RES - 1)  # voxel size over [-0.5, 0.5]
+
+
+def shapes():
+    return {
+        "sphere": A.sphere((0.01, 0.02, -0.03), 0.3),
+        "torus": A.torus((0, 0, 0.013), 0.3, 0.1),
+        "disk": A.disk((0, 0, 0), 0.3),  # z = 0 lies midway between two node layers
+        "square": A.rectangle((0, 0, 0.01), half_u=0.3, half_v=0.3),
+        "hemisphere": A.hemisphere((0, 0, -0.1), 0.3),
+        "sheets": A.union(A.rectangle((0, 0, -1.5 * H), half_u=0.3, half_v=0.3),
+                          A.rectangle((0, 0, 1.5 * H), half_u=0.3, half_v=0.3)),
+        "two_disks": A.union(A.disk((-0.15, 0, 0.003), 0.3), A.disk((0.3, 0.3, 0.01), 0.03)),
+        "mobius": A.mobius(0.3, 0.12, spacing=H / 6),
+        "t_junction": A.t_junction(0.3, 0.3),
+    }
+
+
+@lru_cache(maxsize=None)
+def run(name, seed=0):
+    shape = shapes()[name]
+    grid = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, RES, exact=False)
+    result = extract_surface(grid, MeshingSettings(seed=seed))
+    return shape, result
+
+
+def summary(mesh):
+    topo = mo.edge_topology(mesh.faces)
+    pairs, _ = mo.dual_edges(mesh.faces, topo)
+    count, labels = mo.face_components(len(mesh.faces), pairs)
+    _, fans = mo.vertex_fans(len(mesh.vertices), mesh.faces, topo)
+    return dict(components=count, labels=labels, loops=mo.boundary_loops(mesh.faces, topo),
+                nonmanifold_edges=int((topo.counts > 2).sum()),
+                nonmanifold_vertices=int((fans > 1).sum()),
+                boundary_vertices=np.unique(topo.edges[topo.counts == 1]))
+
+
+def face_quality(mesh):
+    normals, areas = mo.face_normals(mesh.vertices, mesh.faces)
+    return areas.min() / H ** 2, mo.orientation_consistent(mesh.faces)
+
+
+@pytest.mark.parametrize("name,chi", [("sphere", 2), ("torus", 0)])
+def test_closed_shapes(name, chi):
+    shape, result = run(name)
+    mesh = result.mesh
+    s = summary(mesh)
+    assert s["components"] == 1 and s["loops"] == 0
+    assert s["nonmanifold_edges"] == 0 and s["nonmanifold_vertices"] == 0
+    assert mo.euler_characteristic(mesh.faces) == chi
+    assert [r.status for r in result.components] == [Status.CLOSED_PAIR]
+    d = shape(mesh.vertices)[0] / H
+    assert d.mean() < 0.05 and d.max() < 0.3
+    centroids = mesh.vertices[mesh.faces].mean(axis=1)
+    assert shape(centroids)[0].max() / H < 0.3
+    min_area, consistent = face_quality(mesh)
+    assert consistent and min_area > 1e-6
+    assert mo.signed_volume(mesh.vertices, mesh.faces) > 0  # outward normals: not flipped
+
+
+def rim_distance(name, points):
+    """Distance (voxels) from points to the true rim of an open test shape."""
+    if name == "disk":
+        return np.hypot(np.hypot(points[:, 0], points[:, 1]) - 0.3, points[:, 2]) / H
+    if name == "hemisphere":
+        return np.hypot(np.hypot(points[:, 0], points[:, 1]) - 0.3, points[:, 2] + 0.1) / H
+    if name == "square":
+        q = np.abs(points[:, :2])
+        outside = np.maximum(q - 0.3, 0)
+        inside = np.minimum(0.3 - q[:, 0], 0.3 - q[:, 1])
+        planar = np.where(np.any(q > 0.3, axis=1), np.linalg.norm(outside, axis=1), inside)
+        return np.hypot(planar, points[:, 2] - 0.01) / H
+    raise KeyError(name)
+
+
+def rim_points(name):
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    if name in ("disk", "hemisphere"):
+        z = 0.0 if name == "disk" else -0.1
+        return np.stack([0.3 * np.cos(t), 0.3 * np.sin(t), np.full_like(t, z)], axis=1)
+    s = np.linspace(-0.3, 0.3, 100)
+    sides = [np.stack([s, np.full_like(s, k), np.full_like(s, 0.01)], 1) for k in (-0.3, 0.3)]
+    sides += [np.stack([np.full_like(s, k), s, np.full_like(s, 0.01)], 1) for k in (-0.3, 0.3)]
+    return np.concatenate(sides)
+
+
+@pytest.mark.parametrize("name", ["disk", "square", "hemisphere"])
+def test_open_shapes_one_layer(name):
+    shape, result = run(name)
+    mesh = result.mesh
+    s = summary(mesh)
+    assert [r.status for r in result.components] == [Status.SPLIT]
+    assert s["components"] == 1 and s["loops"] == 1
+    assert s["nonmanifold_edges"] == 0 and s["nonmanifold_vertices"] == 0
+    assert mo.euler_characteristic(mesh.faces) == 1  # a disk: no double layer, no holes
+    cover = result.components[0].cover_faces
+    assert 0.4 < len(mesh.faces) / cover < 0.6
+    d = shape(mesh.vertices)[0] / H
+    assert d.mean() < 0.05 and d.max() < 0.5
+    rim = mesh.vertices[s["boundary_vertices"]]
+    assert rim_distance(name, rim).max() < 2.0  # every boundary vertex is near the true rim
+    from scipy.spatial import cKDTree
+    gap, _ = cKDTree(rim).query(rim_points(name))
+    assert gap.max() / H < 2.5  # and the whole true rim is followed
+    # no double layer: no face sits on top of another with the opposite normal
+    normals, _ = mo.face_normals(mesh.vertices, mesh.faces)
+    cents = mesh.vertices[mesh.faces].mean(axis=1)
+    tree = cKDTree(cents)
+    pairs = tree.query_pairs(0.3 * H, output_type="ndarray")
+    opposite = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) < -0.5
+    assert opposite.sum() <= 0.01 * len(mesh.faces)
+    assert face_quality(mesh)[1]
+
+
+def test_two_close_sheets_stay_separate():
+    _, result = run("sheets")
+    mesh = result.mesh
+    s = summary(mesh)
+    assert [r.status for r in result.components] == [Status.SPLIT, Status.SPLIT]
+    assert s["components"] == 2 and s["loops"] == 2
+    for k in range(2):
+        z = mesh.vertices[np.unique(mesh.faces[s["labels"] == k]), 2]
+        assert np.ptp(z) < 0.2 * H  # each piece is flat, on one of the sheets
+        assert abs(abs(z.mean()) - 1.5 * H) < 0.05 * H
+
+
+def test_small_disk_is_kept():
+    _, result = run("two_disks")
+    mesh = result.mesh
+    s = summary(mesh)
+    assert s["components"] == 2
+    centres = np.array([mesh.vertices[np.unique(mesh.faces[s["labels"] == k])].mean(axis=0)
+                        for k in range(2)])
+    assert np.min(np.linalg.norm(centres - [0.3, 0.3, 0.01], axis=1)) < 2 * H
+    big = result.components[0]
+    assert big.status == Status.SPLIT and big.cover_faces > 10 * result.components[1].cover_faces
+
+
+@pytest.mark.parametrize("name", ["mobius", "t_junction"])
+def test_non_orientable_or_non_manifold_flagged(name):
+    shape, result = run(name)
+    statuses = {r.status for r in result.components}
+    assert statuses & {Status.NOT_ORIENTABLE, Status.FAILED}
+    assert result.messages  # the user is told
+    mesh = result.mesh
+    assert len(mesh.faces) > 0
+    d = shape(mesh.vertices)[0] / H
+    assert np.median(d) < 0.1  # the kept double layer still lies on the surface
+
+
+def test_same_seed_same_mesh_and_band_input():
+    _, a = run("hemisphere")
+    shape = shapes()["hemisphere"]
+    dense = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, RES, exact=False)
+    udf = dense.slab(0, dense.shape[0])
+    idx = np.argwhere(udf < 4 * H)
+    band = UDFGrid.from_band(idx, udf[tuple(idx.T)], dense.shape, dense.origin, H, 4 * H)
+    b = extract_surface(band, MeshingSettings(seed=0))
+    assert np.array_equal(a.mesh.faces, b.mesh.faces)
+    assert np.array_equal(a.mesh.vertices, b.mesh.vertices)
+
+
+def test_exact_callable_and_timings():
+    shape = A.sphere((0, 0, 0), 0.3)
+    grid = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, 40, exact=True)
+    seen = []
+    result = extract_surface(grid, MeshingSettings(iterations=120),
+                             progress=lambda f, m: seen.append(f))
+    d = shape(result.mesh.vertices)[0] / grid.spacing
+    assert d.mean() < 0.05 and d.max() < 0.3
+    assert set(result.timings) >= {"marching_cubes", "optimize", "cut", "cleanup"}
+    assert seen and seen[-1] == 1.0 and all(0 <= f <= 1 for f in seen)
+    assert result.iso == pytest.approx(grid.spacing)
+
+
+def test_cancel_is_honoured():
+    grid = A.sample_grid(A.sphere((0, 0, 0), 0.3), [-0.5] * 3, [0.5] * 3, 40, exact=False)
+    calls = []
+
+    def cancel():
+        calls.append(1)
+        return len(calls) > 3
+
+    with pytest.raises(Cancelled):
+        extract_surface(grid, cancel=cancel)
+
+
+def test_no_cut_keeps_double_layer():
+    grid = A.sample_grid(A.disk((0, 0, 0), 0.3), [-0.5] * 3, [0.5] * 3, 40, exact=False)
+    result = extract_surface(grid, MeshingSettings(cut=False, iterations=100))
+    assert [r.status for r in result.components] == [Status.UNCUT]
+    assert summary(result.mesh)["loops"] == 0  # the closed pancake

@@ -1,0 +1,72 @@
+"""Mesh operators and clean-up on small hand-made meshes."""
+
+import numpy as np
+
+from engine.meshing import mesh_ops as mo
+from engine.meshing.cleanup import clean_mesh
+
+
+def grid_mesh(n=6):
+    """A flat n x n vertex grid in z = 0, two triangles per quad, consistently oriented."""
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float), indexing="ij")
+    verts = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], axis=1)
+    faces = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            faces += [(a, b, c), (a, c, d)]
+    return verts, np.array(faces, dtype=np.int64)
+
+
+def test_laplacian_rows_and_linear_precision():
+    verts, faces = grid_mesh()
+    topo = mo.edge_topology(faces)
+    lap = mo.uniform_laplacian(len(verts), topo.edges)
+    assert np.allclose(np.asarray(lap.sum(axis=1)).ravel(), 1.0)
+    # interior vertices of a regular, symmetric-enough patch: the umbrella of a linear field is 0
+    x = verts @ np.array([[1.0, 0.5, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 0.0]])
+    interior = (verts[:, 0] > 0) & (verts[:, 0] < 5) & (verts[:, 1] > 0) & (verts[:, 1] < 5)
+    assert np.allclose((lap @ x - x)[interior], 0.0)
+
+
+def test_centroids_edges_and_boundary():
+    verts, faces = grid_mesh()
+    cen = mo.centroid_matrix(len(verts), faces)
+    assert np.allclose(cen @ verts, verts[faces].mean(axis=1))
+    topo = mo.edge_topology(faces)
+    assert set(np.unique(topo.counts)) == {1, 2}
+    assert mo.boundary_loops(faces) == 1
+    assert mo.euler_characteristic(faces) == 1
+    assert mo.orientation_consistent(faces)
+    pairs, _ = mo.dual_edges(faces, topo)
+    assert len(pairs) == int((topo.counts == 2).sum())
+    count, _ = mo.face_components(len(faces), pairs)
+    assert count == 1
+    normals, areas = mo.face_normals(verts, faces)
+    assert np.allclose(normals, [0, 0, 1]) and np.allclose(areas, 0.5)
+
+
+def test_bow_tie_is_split():
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    faces = np.array([[0, 1, 2], [0, 3, 4]])  # two triangles sharing only vertex 0
+    _, fans = mo.vertex_fans(len(verts), faces)
+    assert fans[0] == 2
+    v2, f2 = mo.split_nonmanifold_vertices(verts, faces)
+    assert len(v2) == 6
+    _, fans2 = mo.vertex_fans(len(v2), f2)
+    assert fans2.max() == 1
+    assert np.allclose(v2[f2], verts[faces])  # same geometry
+
+
+def test_clean_mesh_degenerate_and_small_pieces():
+    verts, faces = grid_mesh(4)
+    far = verts + [10, 0, 0]
+    verts2 = np.concatenate([verts, far, [[0, 0, 0]]])
+    small = np.array([[16, 17, 20]])  # one lone triangle of the second copy
+    degenerate = np.array([[0, 0, 1], [0, 1, 32]])  # repeated index; zero area (32 == vertex 0)
+    faces2 = np.concatenate([faces, small, degenerate])
+    v, f, counts = clean_mesh(verts2, faces2, spacing=1.0, min_component_faces=2)
+    assert counts["degenerate"] == 2 and counts["small_pieces"] == 1
+    assert len(f) == len(faces) and len(v) == len(verts)
+    v, f, counts = clean_mesh(verts2, faces2, spacing=1.0, min_component_faces=0)
+    assert len(f) == len(faces) + 1
