@@ -14,7 +14,7 @@ from typing import Callable, Dict
 import numpy as np
 
 from ..bench.dataset import make_input, make_shape
-from ..field import _predict_trimmed as predict_trimmed
+from ..field import predict_trimmed
 from ..frame import UnitFrame
 from ..patches import MAX_POINTS, gather_patches
 from ..selector import parent_features

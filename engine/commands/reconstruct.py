@@ -1,0 +1,116 @@
+"""``python -m engine reconstruct INPUT OUTPUT``: a mesh file from a point-cloud file.
+
+Progress goes to stderr (one updating line on a terminal, a line per 5 % otherwise); the last
+line says where the mesh went, its size and the time. The mesh is in the input's coordinates.
+Ctrl-C cancels at the next check (a second Ctrl-C stops at once). Nothing is written when the
+input is refused or the run is cancelled.
+"""
+
+import re
+import signal
+import sys
+import threading
+import time
+
+from ..settings import DEVICES, RADIUS_MODES, ReconstructSettings
+
+
+def add_arguments(parser) -> None:
+    """Register the command's arguments on an ``argparse`` parser."""
+    defaults = ReconstructSettings()
+    parser.add_argument("input", help="point cloud or mesh file (.ply, .obj, .off, .xyz, "
+                                      ".pts, .txt, .npy, .npz, .las, .laz)")
+    parser.add_argument("output", help="mesh file to write (.ply, .obj or .off)")
+    parser.add_argument("--resolution", type=int, default=defaults.resolution,
+                        help=f"grid cells along the longest side (default {defaults.resolution})")
+    parser.add_argument("--radius-mode", choices=RADIUS_MODES, default=defaults.radius_mode,
+                        help=f"how the ball radius is chosen (default {defaults.radius_mode})")
+    parser.add_argument("--radius", type=float, default=defaults.radius,
+                        help=f"ball radius of the fixed mode, unit frame "
+                             f"(default {defaults.radius})")
+    parser.add_argument("--parent-radius", type=float, default=defaults.parent_radius,
+                        help=f"parent ball radius R of the curvature and learned modes "
+                             f"(default {defaults.parent_radius})")
+    parser.add_argument("--rho-min", type=float, default=defaults.rho_min,
+                        help=f"smallest radius as a fraction of R (default {defaults.rho_min})")
+    parser.add_argument("--rho-max", type=float, default=defaults.rho_max,
+                        help=f"largest radius as a fraction of R (default {defaults.rho_max})")
+    parser.add_argument("--device", choices=DEVICES, default=defaults.device,
+                        help=f"where the networks run (default {defaults.device})")
+    parser.add_argument("--seed", type=int, default=defaults.seed,
+                        help=f"seed of every random choice (default {defaults.seed})")
+    parser.add_argument("--min-component-faces", type=int, default=defaults.min_component_faces,
+                        help="drop output pieces with fewer faces (default 0: keep all)")
+    parser.add_argument("--udf-source", choices=("network", "nearest"), default="network",
+                        help="the learned backbone, or the distance to the nearest input point "
+                             "(a non-learned baseline); default network")
+    parser.add_argument("--quiet", action="store_true", help="print only errors")
+
+
+class _StderrProgress:
+    """Progress on stderr: an updating line on a terminal, else a line per 5 % or new stage
+    (a stage is the message with its numbers left out)."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.tty = sys.stderr.isatty()
+        self.last_step = -1
+        self.last_stage = None
+        self.dirty = False
+
+    def __call__(self, fraction: float, message: str) -> None:
+        if self.quiet:
+            return
+        percent = 100.0 * fraction
+        if self.tty:
+            sys.stderr.write(f"\r{percent:5.1f}%  {message[:70]:<70}")
+            self.dirty = True
+        else:
+            stage = re.sub(r"\d[\d,./]*", "#", message)  # "(4/200)" and "(8/200)": one stage
+            step = int(percent // 5)
+            if step == self.last_step and stage == self.last_stage:
+                return
+            self.last_step, self.last_stage = step, stage
+            sys.stderr.write(f"{percent:5.1f}%  {message}\n")
+        sys.stderr.flush()
+
+    def end_line(self) -> None:
+        if self.dirty:
+            sys.stderr.write("\n")
+            self.dirty = False
+
+
+def run(args) -> int:
+    """Read the input, reconstruct, write the output; return the exit status."""
+    from ..io import read_point_cloud, write_mesh
+    from ..reconstruct import reconstruct
+
+    started = time.perf_counter()
+    settings = ReconstructSettings(
+        radius_mode=args.radius_mode, radius=args.radius, parent_radius=args.parent_radius,
+        rho_min=args.rho_min, rho_max=args.rho_max, resolution=args.resolution,
+        device=args.device, seed=args.seed, min_component_faces=args.min_component_faces,
+    ).validate()
+    progress = _StderrProgress(args.quiet)
+    stop = threading.Event()
+
+    def interrupt(signum, frame):
+        # the first Ctrl-C cancels cleanly at the next check; a second one ends at once
+        stop.set()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = signal.signal(signal.SIGINT, interrupt)
+    try:
+        cloud = read_point_cloud(args.input)
+        result = reconstruct(cloud, settings, progress, stop.is_set, udf_source=args.udf_source)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        progress.end_line()
+    write_mesh(args.output, result.mesh)
+    if not args.quiet:
+        for message in result.messages:
+            print(f"note: {message}", file=sys.stderr)
+        print(f"wrote {args.output}: {len(result.mesh.vertices):,} vertices, "
+              f"{len(result.mesh.faces):,} faces from {len(cloud):,} points "
+              f"in {time.perf_counter() - started:.1f} s", file=sys.stderr)
+    return 0

@@ -1,0 +1,310 @@
+"""The unsigned distance field on a grid band near the input points.
+
+The grid covers the points' bounding box plus a margin, with spacing ``h = 1 / resolution`` and
+the exact index-to-position map ``x = origin + i * h`` (``indexing='ij'``). Only the *band* is
+evaluated: the nodes within distance R of some input point, with R the largest ball radius of
+the radius policy (widened to ``MIN_BAND_NODES`` spacings on coarse grids). They are found
+without a k-d tree query per grid node: the points are voxelised onto the grid, the occupancy is
+dilated by a cube of half-width ``ceil(R / h + 1/2)`` nodes (a superset of the band) and only
+those candidates are checked against the exact nearest-point distance.
+
+Band nodes get ``prediction * r`` from the backbone on their patch of radius r (the radius
+policy's choice). A band node whose ball holds fewer than ``MIN_PATCH_POINTS`` points gets its
+nearest-point distance instead: an empty ball says nothing (the nearest point is farther than
+r), and one or two points at the rim of the ball cannot tell the network where the surface
+runs (LoSF-UDF likewise skips balls with fewer than 6 points). The nearest-point distance is
+an upper bound of the UDF when the points lie on the surface. Every other node
+is farther than R from all input points and holds R: the field is the UDF truncated at R, which
+is all the mesher needs, as its iso-level (at most 2 spacings) stays below R.
+
+``udf_source="nearest"`` replaces the network by the distance to the nearest input point: the
+non-learned baseline, exact on the band up to the sampling gaps of the cloud.
+"""
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Tuple
+
+import numpy as np
+
+from .errors import InputError
+from .meshing import UDFGrid
+from .patches import MAX_POINTS, QUERY_CHUNK, gather_patches
+from .progress import CancelFn, ProgressFn, check_cancel, no_progress
+from .radius import max_radius, radii_for_queries, require_policy
+from .settings import ReconstructSettings
+
+UDF_SOURCES = ("network", "nearest")
+# Balls with fewer points use the nearest-point distance (see the module docstring).
+MIN_PATCH_POINTS = 3
+# Margin beyond the band radius on each side of the grid, in nodes.
+MARGIN_NODES = 3
+# The band is at least this many spacings wide, so that the mesher sees a few nodes of true
+# distance on each side of the surface even when the ball radius is below one spacing.
+MIN_BAND_NODES = 3
+# Queries per backbone call: about 8k x 64 x 3 float32 = 6 MB of patches on CPU.
+CPU_BATCH = 8192
+CUDA_BATCH = 65536
+# Patches are cut to their group's largest point count before the backbone (see
+# predict_trimmed); no narrower than MIN_WIDTH columns (the backbone reads its 8 nearest).
+TRIM_GROUP = 1024
+MIN_WIDTH = 16
+
+Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class BandField:
+    """A UDF grid and how it was made.
+
+    grid : UDFGrid
+        The field as a sparse band, unit frame; ``far_value`` (= band radius) elsewhere.
+    stats : dict
+        ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``, ``sparse_balls`` (band
+        nodes whose ball held fewer than ``MIN_PATCH_POINTS`` points: not sent to the network),
+        ``mean_patch_points`` (over the balls the network saw),
+        ``udf_source``, ``device`` (``cpu``, ``cuda``, ``custom`` predictor or ``none``),
+        ``seconds_band``, ``seconds_udf``.
+    """
+
+    grid: UDFGrid
+    stats: dict = field(default_factory=dict)
+
+
+def grid_layout(points: np.ndarray, resolution: int, band_radius: float,
+                ) -> Tuple[Tuple[int, int, int], np.ndarray, float]:
+    """The grid that holds the band of ``points``.
+
+    Parameters
+    ----------
+    points : (N, 3) float array, unit frame
+    resolution : grid cells along the longest side of the unit frame (spacing 1 / resolution)
+    band_radius : R, the largest ball radius (unit frame)
+
+    Returns
+    -------
+    shape : (nx, ny, nz) node counts
+    origin : (3,) float64, position of node (0, 0, 0)
+    spacing : float, h
+    """
+    spacing = 1.0 / resolution
+    low, high = points.min(axis=0), points.max(axis=0)
+    margin = math.ceil(band_radius / spacing) + MARGIN_NODES
+    cells = np.ceil((high - low) / spacing - 1e-9).astype(np.int64)
+    shape = tuple(int(c) + 1 + 2 * margin for c in cells)
+    centre = 0.5 * (low + high)
+    origin = centre - 0.5 * (np.asarray(shape, dtype=np.float64) - 1.0) * spacing
+    return shape, origin, spacing
+
+
+def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.ndarray,
+              spacing: float, band_radius: float,
+              cancel: Optional[CancelFn] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Every grid node within ``band_radius`` of an input point, and its nearest-point distance.
+
+    Parameters
+    ----------
+    tree : scipy.spatial.cKDTree over ``points``
+    points : (N, 3) float array, unit frame, inside the grid with its margin
+    shape, origin, spacing : the grid (see :func:`grid_layout`)
+    band_radius : R, unit frame
+    cancel : optional cancel check, called between chunks
+
+    Returns
+    -------
+    indices : (M, 3) int64 node indices, in C order of the grid
+    nearest : (M,) float64 distance from each node to its nearest input point, <= R
+    """
+    from scipy import ndimage
+
+    voxels = np.rint((points - origin) / spacing).astype(np.int64)
+    occupied = np.zeros(shape, dtype=np.uint8)
+    occupied[voxels[:, 0], voxels[:, 1], voxels[:, 2]] = 1
+    # a node within R of p is within R/h + 1/2 nodes of p's nearest node along every axis
+    width = 2 * math.ceil(band_radius / spacing + 0.5) + 1
+    for axis in range(3):
+        occupied = ndimage.maximum_filter1d(occupied, width, axis=axis, mode="constant")
+    check_cancel(cancel)
+    candidates = np.argwhere(occupied)
+    del occupied
+    bound = float(np.nextafter(band_radius, np.inf))
+    keep = np.zeros(len(candidates), dtype=bool)
+    nearest = np.empty(len(candidates), dtype=np.float64)
+    for start in range(0, len(candidates), 4 * QUERY_CHUNK):
+        stop = min(start + 4 * QUERY_CHUNK, len(candidates))
+        positions = origin + candidates[start:stop] * spacing
+        distance, _ = tree.query(positions, k=1, distance_upper_bound=bound, workers=-1)
+        keep[start:stop] = distance <= band_radius
+        nearest[start:stop] = distance
+        check_cancel(cancel)
+    return candidates[keep], nearest[keep]
+
+
+def resolve_device(device: str) -> str:
+    """``"cpu"`` or ``"cuda"`` for a settings device; ``auto`` picks CUDA when torch sees one.
+
+    Raises
+    ------
+    InputError
+        ``cuda`` was asked for but torch is not installed or sees no CUDA device.
+    """
+    if device == "cpu":
+        return "cpu"
+    import importlib.util
+
+    if importlib.util.find_spec("torch") is None:
+        if device == "cuda":
+            raise InputError("device 'cuda' needs PyTorch with CUDA, which is not installed; "
+                             "use device 'auto' or 'cpu'")
+        return "cpu"
+    import torch
+
+    if torch.cuda.is_available():
+        return "cuda"
+    if device == "cuda":
+        raise InputError("device 'cuda' was asked for but PyTorch sees no CUDA GPU; "
+                         "use device 'auto' or 'cpu'")
+    return "cpu"
+
+
+def backbone_predictor(device: str) -> Predictor:
+    """The backbone as ``predict(rel (B, 64, 3) float32, mask (B, 64) bool) -> (B,) UDF / r``.
+
+    numpy on ``cpu`` (what Blender ships), torch on ``cuda``.
+    """
+    from . import backbone
+
+    if not backbone.DEFAULT_WEIGHTS.exists():
+        raise InputError(f"the backbone weights ({backbone.DEFAULT_WEIGHTS.name}) are missing "
+                         f"from {backbone.DEFAULT_WEIGHTS.parent}; reinstall the extension, or "
+                         f"use the 'nearest' UDF source")
+    if device == "cpu":
+        return backbone.load_backbone_numpy().predict
+    import torch
+
+    model = backbone.load_backbone_torch(device=device)
+
+    def predict(rel: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            out = model(torch.from_numpy(rel).to(device), torch.from_numpy(mask).to(device))
+        return out.float().cpu().numpy()
+
+    return predict
+
+
+def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSettings] = None,
+                     progress: Optional[ProgressFn] = None, cancel: Optional[CancelFn] = None,
+                     udf_source: str = "network", tree=None,
+                     predictor: Optional[Predictor] = None) -> BandField:
+    """Evaluate the unsigned distance field on the band of grid nodes near the points.
+
+    Parameters
+    ----------
+    points_unit : (N, 3) float array
+        Input points in the unit frame (bounding box longest side 1).
+    settings : ReconstructSettings, optional
+        ``resolution`` (grid spacing 1 / resolution), the radius policy and its radii, ``device``.
+    progress : callable ``(fraction, message)``, optional
+    cancel : callable ``() -> bool``, optional
+        Checked between batches; raises :class:`Cancelled` when it returns True.
+    udf_source : ``"network"`` or ``"nearest"``
+        The backbone, or the distance to the nearest input point (no network).
+    tree : scipy.spatial.cKDTree over ``points_unit``, optional (built when missing)
+    predictor : callable, optional
+        Replaces the backbone (same signature as :func:`backbone_predictor`'s result).
+
+    Returns
+    -------
+    BandField
+        The grid (float32 UDF, unit frame) and statistics.
+    """
+    from scipy.spatial import cKDTree
+
+    settings = (settings or ReconstructSettings()).validate()
+    if udf_source not in UDF_SOURCES:
+        raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")
+    progress = progress or no_progress
+    points = np.asarray(points_unit, dtype=np.float64).reshape(-1, 3)
+    use_network = udf_source == "network"
+    if use_network:
+        require_policy(settings)  # refuse an unavailable radius mode before any work
+    tree = tree if tree is not None else cKDTree(points)
+
+    started = time.perf_counter()
+    progress(0.0, "finding the query band")
+    spacing = 1.0 / settings.resolution
+    band_radius = max(max_radius(settings), MIN_BAND_NODES * spacing)
+    shape, origin, spacing = grid_layout(points, settings.resolution, band_radius)
+    indices, nearest = find_band(tree, points, shape, origin, spacing, band_radius, cancel)
+    seconds_band = time.perf_counter() - started
+    stats = {"grid_shape": shape, "spacing": spacing, "band_radius": band_radius,
+             "band_nodes": int(len(indices)), "udf_source": udf_source, "device": "none",
+             "sparse_balls": 0, "mean_patch_points": 0.0, "seconds_band": seconds_band}
+    progress(0.1, f"query band: {len(indices):,} grid nodes")
+
+    started = time.perf_counter()
+    if use_network:
+        values = _network_values(points, tree, origin + indices * spacing, nearest, settings,
+                                 predictor, progress, cancel, stats)
+    else:
+        values = nearest.astype(np.float32)
+    stats["seconds_udf"] = time.perf_counter() - started
+    grid = UDFGrid.from_band(indices, values, shape, origin, spacing, far_value=band_radius)
+    progress(1.0, "field done")
+    return BandField(grid, stats)
+
+
+def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.ndarray,
+                    settings: ReconstructSettings, predictor: Optional[Predictor],
+                    progress: ProgressFn, cancel: Optional[CancelFn], stats: dict) -> np.ndarray:
+    """Backbone UDF (unit frame) at each band query: (M,) float32."""
+    if predictor is None:
+        device = resolve_device(settings.device)
+        predictor = backbone_predictor(device)
+        stats["device"] = device
+    else:
+        stats["device"] = "custom"
+    on_gpu = stats["device"] == "cuda"
+    batch = CUDA_BATCH if on_gpu else CPU_BATCH
+    group = batch if on_gpu else TRIM_GROUP  # a GPU prefers few large calls
+    values = np.empty(len(queries), dtype=np.float32)
+    sparse = 0
+    total_points = 0
+    for start in range(0, len(queries), batch):
+        check_cancel(cancel)
+        stop = min(start + batch, len(queries))
+        radii = radii_for_queries(settings, tree, points, queries[start:stop])
+        rel, mask, counts = gather_patches(tree, points, queries[start:stop], radii, MAX_POINTS)
+        chunk = nearest[start:stop].astype(np.float32)
+        seen = np.flatnonzero(counts >= MIN_PATCH_POINTS)
+        chunk[seen] = predict_trimmed(predictor, rel[seen], mask[seen], counts[seen],
+                                       group, cancel) * radii[seen]
+        values[start:stop] = chunk
+        sparse += len(counts) - len(seen)
+        total_points += int(counts[seen].sum())
+        progress(0.1 + 0.9 * stop / len(queries),
+                 f"network UDF: {stop:,} / {len(queries):,} queries")
+    stats["sparse_balls"] = sparse
+    stats["mean_patch_points"] = total_points / max(len(queries) - sparse, 1)
+    return values
+
+
+def predict_trimmed(predictor: Predictor, rel: np.ndarray, mask: np.ndarray,
+                     counts: np.ndarray, group_size: int,
+                     cancel: Optional[CancelFn] = None) -> np.ndarray:
+    """UDF / r of patches with points, (B,) float64, computed on as few padding rows as possible.
+
+    Padding rows never change the backbone's output, but they cost as much as real points. The
+    patches are taken in order of point count, in groups of ``group_size``, each cut to its
+    largest count (at least ``MIN_WIDTH`` columns); ``cancel`` is checked between groups.
+    """
+    out = np.empty(len(counts), dtype=np.float64)
+    order = np.argsort(counts, kind="stable")
+    for start in range(0, len(order), group_size):
+        check_cancel(cancel)
+        group = order[start:start + group_size]
+        width = max(int(counts[group].max()), MIN_WIDTH)
+        out[group] = np.asarray(predictor(rel[group, :width], mask[group, :width]),
+                                dtype=np.float64).reshape(-1)
+    return out

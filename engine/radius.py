@@ -1,0 +1,113 @@
+"""Radius policies: the backbone's ball radius for each query.
+
+``fixed`` gives every query the settings' radius (LoSF-UDF). ``curvature`` (a GeoLA-style
+heuristic, :mod:`.curvature`) and ``learned`` (the selector network) choose a radius per query in
+[rho_min * R, rho_max * R] from the points of the parent ball of radius R. ``learned`` runs once
+the selector's weights file is there; until then it is refused with a message that says so.
+"""
+
+import functools
+from typing import Callable, Dict
+
+import numpy as np
+
+from .errors import InputError
+from .settings import ReconstructSettings
+
+RadiusPolicy = Callable[[ReconstructSettings, object, np.ndarray, np.ndarray], np.ndarray]
+
+
+def fixed_radii(settings: ReconstructSettings, tree, points: np.ndarray,
+                queries: np.ndarray) -> np.ndarray:
+    """Every query gets ``settings.radius``: (Q,) float64, unit frame."""
+    return np.full(len(queries), float(settings.radius), dtype=np.float64)
+
+
+def curvature_policy(settings: ReconstructSettings, tree, points: np.ndarray,
+                     queries: np.ndarray) -> np.ndarray:
+    """Smaller balls where the parent ball's surface variation is larger: (Q,) float64."""
+    from .curvature import curvature_radii
+
+    return curvature_radii(tree, points, queries, settings.parent_radius,
+                           settings.rho_min, settings.rho_max)
+
+
+def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
+                   queries: np.ndarray) -> np.ndarray:
+    """The selector network's radius per query, in [rho_min R, rho_max R]: (Q,) float64."""
+    from .selector import predict_radii
+
+    return predict_radii(_shipped_selector(), tree, points, queries,
+                         settings.parent_radius, settings.rho_min, settings.rho_max)
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_selector():
+    """The shipped selector, loaded once per process (the field asks batch after batch)."""
+    from .selector import load_selector_numpy
+
+    return load_selector_numpy()
+
+
+def learned_available() -> bool:
+    """Whether the selector's weights ship with this installation."""
+    from .selector import DEFAULT_WEIGHTS
+
+    return DEFAULT_WEIGHTS.exists()
+
+
+POLICIES: Dict[str, RadiusPolicy] = {
+    "fixed": fixed_radii,
+    "curvature": curvature_policy,
+}
+if learned_available():
+    POLICIES["learned"] = learned_policy
+
+
+def require_policy(settings: ReconstructSettings) -> RadiusPolicy:
+    """The policy of ``settings.radius_mode``; :class:`InputError` when it is not built yet."""
+    policy = POLICIES.get(settings.radius_mode)
+    if policy is None:
+        raise InputError(f"radius mode {settings.radius_mode!r} is not available yet; "
+                         f"use one of: {', '.join(POLICIES)}")
+    return policy
+
+
+def max_radius(settings: ReconstructSettings) -> float:
+    """The largest radius the policy of ``settings`` can return (unit frame).
+
+    The field's query band is every grid node within this distance of an input point.
+    """
+    if settings.radius_mode == "fixed":
+        return float(settings.radius)
+    return float(settings.rho_max * settings.parent_radius)
+
+
+def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
+                      queries: np.ndarray) -> np.ndarray:
+    """The ball radius of each query under ``settings.radius_mode``.
+
+    Parameters
+    ----------
+    settings : ReconstructSettings
+        ``radius_mode`` picks the policy; ``radius``, ``parent_radius``, ``rho_min``,
+        ``rho_max`` bound it.
+    tree : scipy.spatial.cKDTree
+        Built over ``points``.
+    points : (N, 3) float array
+        Input points, unit frame.
+    queries : (Q, 3) float array
+        Query positions, unit frame.
+
+    Returns
+    -------
+    (Q,) float64
+        Radii in the unit frame, each in (0, :func:`max_radius`].
+
+    Raises
+    ------
+    InputError
+        When the radius mode is not available yet.
+    """
+    radii = require_policy(settings)(settings, tree, points, queries)
+    return np.minimum(radii, max_radius(settings))

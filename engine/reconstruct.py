@@ -1,0 +1,174 @@
+"""The one entry point of a reconstruction: points in, mesh out.
+
+The CLI, the Blender operator, the batch script and the benchmark all call :func:`reconstruct`;
+none of them re-implements a stage. The stages (DESIGN.md, "Data flow"):
+
+1. validate the settings; put the points in the unit frame (refusing clouds no surface can be
+   built from);
+2. evaluate the UDF on the grid band near the points (:mod:`.field`);
+3. extract a single-layer mesh with DCUDF (:mod:`.meshing`);
+4. map the mesh back to the input's coordinates (the same similarity transform, inverted) and
+   carry the input colours to its vertices (nearest input point).
+"""
+
+import time
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Union
+
+import numpy as np
+
+from .errors import InputError
+from .field import UDF_SOURCES, compute_udf_band
+from .frame import UnitFrame
+from .geometry import Mesh, PointCloud
+from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+from .settings import ReconstructSettings
+
+# Share of the progress bar per stage (the field and the mesher take most of the time).
+_FIELD_END = 0.6
+_MESH_END = 0.97
+# Below this mean number of points per ball the backbone sees too little of the surface.
+SPARSE_PATCH_POINTS = 6.0
+
+
+@dataclass
+class ReconstructResult:
+    """What a reconstruction produced.
+
+    mesh : Mesh
+        In the input's own coordinates; colours when the input had colours.
+    messages : list of str
+        Notes for the user (warnings from the mesher, too sparse a cloud, ...).
+    timings : dict of str to float
+        Seconds per stage: ``frame``, ``band``, ``udf``, ``meshing``, ``finish``, ``total``, and
+        the mesher's own stages as ``meshing_<stage>``.
+    stats : dict
+        ``points``, ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``, ``queries``
+        (backbone evaluations), ``sparse_balls``, ``mean_patch_points``, ``udf_source``,
+        ``device``, ``iso`` (unit frame), ``components`` (pieces of the output), ``vertices``,
+        ``faces``, ``meshing`` (the mesher's own numbers).
+    """
+
+    mesh: Mesh
+    messages: List[str] = field(default_factory=list)
+    timings: Dict[str, float] = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+
+def reconstruct(cloud: Union[PointCloud, np.ndarray],
+                settings: Optional[ReconstructSettings] = None,
+                progress: Optional[ProgressFn] = None, cancel: Optional[CancelFn] = None,
+                udf_source: Optional[str] = None) -> ReconstructResult:
+    """Reconstruct a mesh from a point cloud.
+
+    Parameters
+    ----------
+    cloud : PointCloud or (N, 3) float array
+        The points in any units; ``colors`` (N, 3|4) in [0, 1] are carried to the mesh.
+    settings : ReconstructSettings, optional
+        Defaults to ``ReconstructSettings()``; radii and resolution are in the unit frame.
+    progress : callable ``(fraction, message)``, optional
+        Called with fractions rising from 0 to 1 over the whole reconstruction.
+    cancel : callable ``() -> bool``, optional
+        Polled between batches; when it returns True, :class:`Cancelled` is raised.
+    udf_source : ``"network"`` or ``"nearest"``, optional
+        The backbone, or the non-learned distance to the nearest input point. Defaults to the
+        settings' ``udf_source`` when they have one, else ``"network"``.
+
+    Returns
+    -------
+    ReconstructResult
+
+    Raises
+    ------
+    InputError
+        Bad settings or a cloud no surface can be built from (NaN, too few points, a line ...).
+    Cancelled
+        ``cancel()`` returned True.
+    """
+    from scipy.spatial import cKDTree
+
+    from .meshing import extract_surface
+
+    started = time.perf_counter()
+    progress = progress or no_progress
+    settings = (settings if settings is not None else ReconstructSettings()).validate()
+    udf_source = udf_source or getattr(settings, "udf_source", "network")
+    if udf_source not in UDF_SOURCES:
+        raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")
+    if isinstance(cloud, PointCloud):
+        points, colors = cloud.points, cloud.colors
+    else:
+        points, colors = cloud, None
+    timings: Dict[str, float] = {}
+
+    progress(0.0, "preparing the points")
+    frame = UnitFrame.from_points(points)
+    points_unit = frame.to_unit(points)
+    if colors is not None and len(colors) != len(points_unit):
+        raise InputError(f"the cloud has {len(colors)} colours for {len(points_unit)} points; "
+                         f"give one colour per point or none")
+    tree = cKDTree(points_unit)
+    timings["frame"] = time.perf_counter() - started
+    check_cancel(cancel)
+
+    band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
+                            cancel, udf_source=udf_source, tree=tree)
+    timings["band"] = band.stats.pop("seconds_band")
+    timings["udf"] = band.stats.pop("seconds_udf")
+    check_cancel(cancel)
+
+    mark = time.perf_counter()
+    meshed = extract_surface(band.grid, meshing_settings(settings),
+                             sub_progress(progress, _FIELD_END, _MESH_END), cancel)
+    timings["meshing"] = time.perf_counter() - mark
+    check_cancel(cancel)
+
+    mark = time.perf_counter()
+    progress(_MESH_END, "mapping the mesh back to the input's coordinates")
+    mesh = meshed.mesh
+    vertices_unit = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    out_colors = None
+    if colors is not None and len(vertices_unit):
+        _, nearest = tree.query(vertices_unit, k=1, workers=-1)
+        out_colors = np.asarray(colors, dtype=np.float32)[nearest]
+    # a similarity transform leaves unit normals unchanged
+    result_mesh = Mesh(frame.from_unit(vertices_unit),
+                       np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3),
+                       None if mesh.normals is None else np.asarray(mesh.normals, np.float64),
+                       out_colors)
+    timings["finish"] = time.perf_counter() - mark
+    timings["total"] = time.perf_counter() - started
+
+    stats = {"points": int(len(points_unit)), **band.stats,
+             "queries": (band.stats["band_nodes"] - band.stats["sparse_balls"]
+                         if udf_source == "network" else 0),
+             "iso": float(meshed.iso), "components": _piece_count(result_mesh),
+             "vertices": int(len(result_mesh.vertices)), "faces": int(len(result_mesh.faces)),
+             "meshing": dict(meshed.stats)}
+    timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
+    messages = list(meshed.messages)
+    if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
+        messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
+                           f"average; for a cloud this sparse, raise the radius")
+    if stats["faces"] == 0:
+        messages.append("the mesh is empty: try a larger radius or a lower resolution")
+    progress(1.0, f"done: {stats['vertices']:,} vertices, {stats['faces']:,} faces")
+    return ReconstructResult(result_mesh, messages, timings, stats)
+
+
+def meshing_settings(settings: ReconstructSettings):
+    """The mesher's settings derived from a reconstruction's: seed, small-piece filter, device."""
+    from .meshing import MeshingSettings
+
+    return MeshingSettings(seed=settings.seed, min_component_faces=settings.min_component_faces,
+                           device=settings.device)
+
+
+def _piece_count(mesh: Mesh) -> int:
+    """Connected pieces of a mesh (faces sharing a vertex), 0 for a mesh without faces."""
+    from .meshing.mesh_ops import vertex_components
+
+    if len(mesh.faces) == 0:
+        return 0
+    return int(vertex_components(len(mesh.vertices), mesh.faces)[0])

@@ -1,0 +1,150 @@
+"""The UDF band: the right nodes, the right values, truncated safely, cancellable."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from engine.errors import Cancelled, InputError
+from engine.field import compute_udf_band, resolve_device
+from engine.settings import ReconstructSettings
+
+
+def sphere_points(count=4000, radius=0.4, seed=0):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(count, 3))
+    return radius * points / np.linalg.norm(points, axis=1, keepdims=True)
+
+
+def node_positions(grid):
+    axes = [grid.origin[a] + np.arange(grid.shape[a]) * grid.spacing for a in range(3)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def band_of(grid):
+    flat, values = grid._band
+    return flat, values
+
+
+def test_band_is_exactly_the_nodes_within_the_radius():
+    points = sphere_points()
+    settings = ReconstructSettings(resolution=64, radius=0.05)
+    band = compute_udf_band(points, settings, udf_source="nearest")
+    grid = band.grid
+    # brute force over every node of the grid (64^3-ish nodes: cheap at this size)
+    distance, _ = cKDTree(points).query(node_positions(grid), k=1, workers=-1)
+    radius = band.stats["band_radius"]
+    assert radius == pytest.approx(0.05)
+    want = np.flatnonzero(distance <= radius)
+    flat, values = band_of(grid)
+    np.testing.assert_array_equal(np.sort(flat), want)
+    np.testing.assert_allclose(values, distance[flat], rtol=1e-6, atol=1e-7)
+    # the grid covers the cloud and the whole band, with margin on every side
+    assert np.all(grid.origin < points.min(axis=0) - radius)
+    assert np.all(grid.index_to_world(np.array(grid.shape) - 1) > points.max(axis=0) + radius)
+
+
+def test_coarse_grids_widen_the_band_to_a_few_spacings():
+    points = sphere_points()
+    band = compute_udf_band(points, ReconstructSettings(resolution=32, radius=0.018),
+                            udf_source="nearest")
+    spacing = band.stats["spacing"]
+    assert band.stats["band_radius"] == pytest.approx(3 * spacing)
+    flat, values = band_of(band.grid)
+    assert values.max() <= 3 * spacing + 1e-7
+
+
+def test_far_nodes_hold_at_least_the_radius():
+    points = sphere_points()
+    settings = ReconstructSettings(resolution=64, radius=0.05)
+    grid = compute_udf_band(points, settings, udf_source="nearest").grid
+    dense = np.concatenate([grid.slab(x, x + 1).reshape(-1) for x in range(grid.shape[0])])
+    distance, _ = cKDTree(points).query(node_positions(grid), k=1, workers=-1)
+    far = distance > 0.05
+    assert grid.far_value >= 0.05
+    assert np.all(dense[far] >= 0.05)
+    # the field never claims a node is farther than it is, where it is below the truncation
+    assert np.all(dense[~far] <= distance[~far] + 1e-6)
+
+
+def nearest_through_patches(rel, mask):
+    """Predicts UDF / r as the first patch point's distance: exact for a dense sampling."""
+    return np.where(mask[:, 0], np.linalg.norm(rel[:, 0], axis=1), 0.0)
+
+
+def test_network_plumbing_scales_by_each_query_radius():
+    # a predictor that reads the nearest patch point reproduces the nearest-point distance only
+    # if the patches are gathered at the right radius and the output is multiplied back by it
+    points = sphere_points()
+    settings = ReconstructSettings(resolution=64, radius=0.05)
+    network = compute_udf_band(points, settings, predictor=nearest_through_patches)
+    nearest = compute_udf_band(points, settings, udf_source="nearest")
+    flat_n, values_n = band_of(network.grid)
+    flat_d, values_d = band_of(nearest.grid)
+    np.testing.assert_array_equal(flat_n, flat_d)
+    np.testing.assert_allclose(values_n, values_d, rtol=1e-5, atol=1e-7)
+    assert network.stats["sparse_balls"] < 0.2 * network.stats["band_nodes"]
+    assert network.stats["mean_patch_points"] > 5
+
+
+def test_curvature_radii_reach_the_field():
+    points = sphere_points(count=8000)
+    settings = ReconstructSettings(resolution=64, radius_mode="curvature", parent_radius=0.05,
+                                   rho_min=0.5, rho_max=1.0)
+    band = compute_udf_band(points, settings, predictor=nearest_through_patches)
+    assert band.stats["band_radius"] == pytest.approx(0.05)
+    nearest = compute_udf_band(points, settings, udf_source="nearest")
+    # band nodes whose smaller ball holds too few points use the nearest-point distance
+    np.testing.assert_allclose(band_of(band.grid)[1], band_of(nearest.grid)[1], rtol=1e-5,
+                               atol=1e-7)
+
+
+def test_learned_mode_is_refused_clearly_while_its_weights_are_missing():
+    from engine.radius import POLICIES
+
+    if "learned" in POLICIES:
+        pytest.skip("the selector weights are installed")
+    settings = ReconstructSettings(resolution=64, radius_mode="learned")
+    with pytest.raises(InputError, match="radius mode 'learned' is not available yet"):
+        compute_udf_band(sphere_points(), settings)
+
+
+def test_cancel_stops_the_field():
+    calls = []
+
+    def cancel():
+        calls.append(1)
+        return len(calls) > 1
+
+    settings = ReconstructSettings(resolution=64, radius=0.03)
+    with pytest.raises(Cancelled):
+        compute_udf_band(sphere_points(), settings, cancel=cancel,
+                         predictor=nearest_through_patches)
+
+
+def test_cuda_is_refused_clearly_without_a_gpu():
+    torch = pytest.importorskip("torch")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    assert resolve_device("auto") == "cpu"
+    with pytest.raises(InputError, match="cuda"):
+        resolve_device("cuda")
+
+
+def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
+    torch = pytest.importorskip("torch")
+    from engine.backbone import build_backbone_torch, load_backbone_numpy, save_backbone
+    from engine.field import _predict_trimmed
+    from engine.patches import gather_patches
+
+    torch.manual_seed(0)
+    path = save_backbone(build_backbone_torch(), tmp_path / "random.npz")
+    network = load_backbone_numpy(path)
+    points = sphere_points(count=20000)
+    queries = points[:2000] + np.random.default_rng(1).normal(scale=0.01, size=(2000, 3))
+    rel, mask, counts = gather_patches(cKDTree(points), points, queries, 0.03)
+    keep = counts > 0
+    rel, mask, counts = rel[keep], mask[keep], counts[keep]
+    assert counts.min() < 16 and counts.max() < 64
+    whole = network.predict(rel, mask)
+    trimmed = _predict_trimmed(network.predict, rel, mask, counts, group_size=256)
+    np.testing.assert_allclose(trimmed, whole, rtol=1e-5, atol=1e-6)
