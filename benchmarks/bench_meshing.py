@@ -2,6 +2,10 @@
 
     python benchmarks/bench_meshing.py [--res 128 256 512] [--iterations N]
 
+cpu s is the process time of the extraction (both threads of the field queries; under load it
+is steadier than the wall times); opt it the iterations run (stage 2 stops early once converged),
+ms/it the wall time per iteration.
+
 Fields: sphere of radius 0.5 and flat disk of radius 0.5 (z = 0, midway between node layers)
 in [-1, 1]^3, dense grids (the grid interpolation path, as with a network's output). Peak memory
 is the process's ru_maxrss after each run (a high-water mark: it never goes down), so run one
@@ -30,7 +34,8 @@ def main():
     shapes = {"sphere": A.sphere((0, 0, 0), 0.5), "disk": A.disk((0, 0, 0), 0.5)}
     header = (f"{'shape':7s} {'res':>4s} {'cover F':>9s} {'out F':>8s} {'grid s':>7s} "
               f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'cut s':>6s} {'clean s':>7s} "
-              f"{'total s':>8s} {'py peak MB':>10s} {'RSS MB':>7s} status")
+              f"{'total s':>8s} {'cpu s':>6s} {'opt it':>6s} {'ms/it':>6s} {'py peak MB':>10s} "
+              f"{'RSS MB':>7s} status")
     print(header, flush=True)
     for res in args.res:
         for name in args.shapes:
@@ -41,16 +46,20 @@ def main():
             if args.iterations is not None:
                 settings.iterations = args.iterations
             tracemalloc.start()
+            cpu = time.process_time()
             result = extract_surface(grid, settings)
+            cpu = time.process_time() - cpu
             _, peak = tracemalloc.get_traced_memory()
             tracemalloc.stop()
             t = result.timings
+            iters = int(result.stats.get("iterations", settings.iterations))
             rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             status = ",".join(sorted({r.status.value for r in result.components}))
             print(f"{name:7s} {res:4d} {int(result.stats['cover_faces']):9d} "
                   f"{len(result.mesh.faces):8d} {grid_s:7.1f} {t['marching_cubes']:6.2f} "
                   f"{t.get('field', 0):7.2f} {t['optimize']:7.1f} {t['cut']:6.2f} "
-                  f"{t['cleanup']:7.2f} {sum(t.values()):8.1f} {peak / 2**20:10.0f} "
+                  f"{t['cleanup']:7.2f} {sum(t.values()):8.1f} {cpu:6.1f} {iters:6d} "
+                  f"{1e3 * t['optimize'] / max(iters, 1):6.0f} {peak / 2**20:10.0f} "
                   f"{rss:7.0f} {status}", flush=True)
             del grid, result
 

@@ -152,7 +152,7 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
                                 sub_progress(progress, 0.05, 0.9), cancel)
     timings["optimize"] = time.perf_counter() - start
     stats.update({"mean_distance_voxels": opt.mean_distance,
-                  "max_distance_voxels": opt.max_distance})
+                  "max_distance_voxels": opt.max_distance, "iterations": opt.iterations})
 
     start = time.perf_counter()
     keep, records = split_cover(verts, faces, h, settings.cut, settings.seed,

@@ -198,10 +198,20 @@ class UDFGrid:
                 step = np.maximum(step, 1e-30).reshape(shape)
                 field[start:start + base.shape[0], ..., a] = (
                     0.5 * (d2[tuple(sl_p)] - d2[tuple(sl_m)]) / step)
-        # per cell, the 8 corner values of each channel side by side: one row gather per query
+        # per cell, the 8 coefficients of the trilinear polynomial of each channel side by side
+        # (one row gather per query): 1, tz, ty, ty tz, tx, tx tz, tx ty, tx ty tz
         cells = np.empty((active.size + 1, BRICK, BRICK, BRICK, 3, 8), dtype=np.float32)
-        for corner, (dx, dy, dz) in enumerate(np.ndindex(2, 2, 2)):
-            cells[..., corner] = field[:, dx:dx + BRICK, dy:dy + BRICK, dz:dz + BRICK]
+        v = [field[:, dx:dx + BRICK, dy:dy + BRICK, dz:dz + BRICK]
+             for dx, dy, dz in np.ndindex(2, 2, 2)]  # corner 4 dx + 2 dy + dz
+        cells[..., 0] = v[0]
+        cells[..., 1] = v[1] - v[0]
+        cells[..., 2] = v[2] - v[0]
+        cells[..., 3] = v[3] - v[2] - v[1] + v[0]
+        cells[..., 4] = v[4] - v[0]
+        cells[..., 5] = v[5] - v[4] - v[1] + v[0]
+        cells[..., 6] = v[6] - v[4] - v[2] + v[0]
+        cells[..., 7] = v[7] - v[6] - v[5] + v[4] - v[3] + v[2] + v[1] - v[0]
+        del v
         self._bricks = (table, cells.reshape(-1, 3, 8), nbricks)
         return int(active.size)
 
@@ -255,22 +265,31 @@ class UDFGrid:
         if self._bricks is None:
             self.prepare(4.0 * self.spacing + max(self.min_value, 0.0))
         table, cells, nbricks = self._bricks
-        dims = np.array(self.shape)
-        g = np.clip(g, 0.0, dims - 1.0)
+        # cell = floor(clip(g, 0, dims - 1)) capped at dims - 2, t = clip(g) - cell, computed as
+        # clip(trunc(g)) and clip(g - cell, 0, 1) (the same numbers, fewer passes)
         cell = g.astype(np.int32)
-        np.minimum(cell, dims - 2, out=cell)
-        tx, ty, tz = (g - cell).astype(np.float32).T
+        np.minimum(cell, np.array(self.shape, np.int32) - 2, out=cell)
+        np.maximum(cell, 0, out=cell)
+        t = g - cell
+        np.clip(t, 0.0, 1.0, out=t)
+        t = t.astype(np.float32)
         brick = cell // BRICK
-        loc = cell - brick * BRICK
-        slot = table[(brick[:, 0] * nbricks[1] + brick[:, 1]) * nbricks[2] + brick[:, 2]]
+        cell -= brick * BRICK  # local cell in its brick
+        brick = (brick[:, 0] * int(nbricks[1]) + brick[:, 1]) * int(nbricks[2]) + brick[:, 2]
+        slot = table[brick]
         inside = slot >= 0
-        slot = np.where(inside, slot, cells.shape[0] // _CELLS - 1)  # last brick: zeros
-        row = slot.astype(np.int64) * _CELLS + (loc[:, 0] * BRICK + loc[:, 1]) * BRICK + loc[:, 2]
-        corners = np.take(cells, row, axis=0)  # (P, 3, 8): channel, corner (dx, dy, dz)
-        sx, sy, sz = 1 - tx, 1 - ty, 1 - tz
-        weights = np.empty((len(g), 8), dtype=np.float32)
-        for k, (wx, wy) in enumerate(((sx, sy), (sx, ty), (tx, sy), (tx, ty))):
-            wxy = wx * wy
-            weights[:, 2 * k] = wxy * sz
-            weights[:, 2 * k + 1] = wxy * tz
-        return np.einsum("nck,nk->nc", corners, weights).astype(np.float64), inside
+        slot[~inside] = cells.shape[0] // _CELLS - 1  # last brick: zeros
+        row = slot.astype(np.intp) * _CELLS
+        row += (cell[:, 0] * BRICK + cell[:, 1]) * BRICK + cell[:, 2]
+        coef = np.take(cells, row, axis=0)  # (P, 3, 8): channel, polynomial term
+        tx, ty, tz = t.T
+        terms = np.empty((len(g), 8), dtype=np.float32)
+        terms[:, 0] = 1.0
+        terms[:, 1] = tz
+        terms[:, 2] = ty
+        np.multiply(ty, tz, out=terms[:, 3])
+        terms[:, 4] = tx
+        np.multiply(tx, tz, out=terms[:, 5])
+        np.multiply(tx, ty, out=terms[:, 6])
+        np.multiply(terms[:, 6], tz, out=terms[:, 7])
+        return np.einsum("nck,nk->nc", coef, terms).astype(np.float64), inside
