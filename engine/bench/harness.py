@@ -1,0 +1,348 @@
+"""Run a reconstruction method over benchmark shapes and score it.
+
+A *method* is any callable ``PointCloud -> Mesh`` (see :mod:`engine.bench.methods`). For each of
+the first ``count`` test shapes of a domain, :func:`run_benchmark` builds the ground truth and the
+input cloud under a condition (:mod:`engine.bench.dataset`), times the method, measures its peak
+memory, and scores the output with :func:`engine.metrics.evaluate` in the ground truth's unit
+frame. A method that raises is *failed*: it is scored as the worst result (CD inf, F1 0, NC 0)
+and counted, never skipped; an output without faces is scored the same way and counted as
+*empty*.
+
+What is measured
+----------------
+* ``seconds``: wall-clock time of the method call only (not building the shape, not scoring);
+  ``cpu_seconds``: process CPU time over the same span.
+* ``peak_rss_mb``: the process's peak resident set size (``VmHWM``) while the method ran. The
+  peak is reset before each call by writing ``5`` to ``/proc/self/clear_refs``, so native
+  allocations (Open3D, torch, numpy) count and earlier shapes do not. It includes the
+  interpreter and the libraries already loaded; ``peak_delta_mb`` is the peak minus the resident
+  size just before the call, i.e. what the call added at its peak. Where the reset is refused
+  (not Linux), ``resource.getrusage`` gives a process-lifetime maximum instead and
+  ``memory_measure`` says so.
+
+The method gets the input points only (``PointCloud(points)``): the dataset's exact normals are
+withheld, so every method estimates what it needs.
+
+Rooms are scanned scenes: faces no scan point saw are not scored. When the dataset provides
+``crop_to_input(mesh, points, max_dist)``, the ground truth is cropped to the faces within
+``crop_max_dist`` (default 0.01, the dataset's default) of the *clean* scan of the same room, so
+every condition is scored against the same visible ground truth, and the prediction is cropped to
+the faces within the same distance of the method's own input (CAP-UDF's ``remove_far``; pieces
+grown around outliers stay and are scored). The result's ``protocol`` records it.
+"""
+
+import json
+import math
+import os
+import platform
+import resource
+import sys
+import time
+from typing import Callable, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from ..geometry import Mesh, PointCloud
+from ..metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
+
+METRIC_KEYS = ("cd_l1_x100", "cd_l2") + tuple(f1_key(t) for t in DEFAULT_THRESHOLDS) + ("nc",)
+CROP_DOMAINS = ("rooms",)
+DEFAULT_CROP_MAX_DIST = 0.01
+_CLEAR_REFS = "/proc/self/clear_refs"
+_STATUS = "/proc/self/status"
+
+
+# --------------------------------------------------------------------------------------------
+# Memory
+
+
+def _status_kb(field: str) -> Optional[int]:
+    """A ``kB`` field of ``/proc/self/status`` (``VmHWM``, ``VmRSS``), or None off Linux."""
+    try:
+        with open(_STATUS) as status:
+            for line in status:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak() -> bool:
+    """Reset the process's peak RSS (``VmHWM``) to its current RSS; False if not possible."""
+    try:
+        with open(_CLEAR_REFS, "w") as clear:
+            clear.write("5")
+        return _status_kb("VmHWM") is not None
+    except OSError:
+        return False
+
+
+class PeakMemory:
+    """Peak resident memory of the process over a ``with`` block.
+
+    Attributes (after the block)
+    ----------------------------
+    peak_mb : float, the process's peak RSS during the block, MiB
+    delta_mb : float, ``peak_mb`` minus the RSS at the start of the block
+    measure : str, ``"VmHWM reset per call"`` or ``"ru_maxrss (process lifetime)"``
+    """
+
+    def __enter__(self) -> "PeakMemory":
+        self.exact = _reset_peak()
+        if self.exact:
+            self._start_kb = _status_kb("VmRSS")
+            self.measure = "VmHWM reset per call"
+        else:
+            self._start_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+            self.measure = "ru_maxrss (process lifetime)"
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        if self.exact:
+            peak_kb = _status_kb("VmHWM")
+        else:
+            peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        self.peak_mb = peak_kb / 1024.0
+        self.delta_mb = max(peak_kb - self._start_kb, 0) / 1024.0
+        return False
+
+
+# --------------------------------------------------------------------------------------------
+# One benchmark run
+
+
+def _default_dataset():
+    from . import dataset
+    return dataset
+
+
+def _worst_scores() -> Dict[str, float]:
+    scores = {"cd_l1_x100": math.inf, "cd_l2": math.inf, "nc": 0.0}
+    scores.update({f1_key(t): 0.0 for t in DEFAULT_THRESHOLDS})
+    return scores
+
+
+def _score(pred: Mesh, gt: Mesh, samples: int, seed: int, crop: Optional[Callable] = None,
+           crop_max_dist: float = DEFAULT_CROP_MAX_DIST, visible_points: np.ndarray = None,
+           input_points: np.ndarray = None) -> dict:
+    """Metrics of ``pred`` against ``gt`` in the full ground truth's unit frame.
+
+    With ``crop``, the ground truth is cropped to ``visible_points`` and the prediction to
+    ``input_points`` (see the module docstring).
+    """
+    from ..frame import UnitFrame
+
+    frame = UnitFrame.from_points(np.asarray(gt.vertices, dtype=np.float64))
+    if crop is not None:
+        gt = crop(gt, visible_points, crop_max_dist)
+        if len(np.asarray(pred.faces).reshape(-1, 3)):
+            pred = crop(pred, input_points, crop_max_dist)
+    return evaluate(pred, gt, samples=samples, seed=seed, frame=frame)
+
+
+def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: str, count: int,
+                  seed: int = 0, samples: int = 100_000, progress=None, *, name: str = None,
+                  dataset=None, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
+                  pass_ground_truth: bool = False) -> dict:
+    """Run ``method`` on the first ``count`` test shapes of ``domain`` under ``condition``.
+
+    Parameters
+    ----------
+    method : callable ``PointCloud -> Mesh``
+        The reconstruction. Any exception it raises (except ``KeyboardInterrupt``) marks the
+        shape failed.
+    domain : ``cars``, ``garments`` or ``rooms`` (a name of ``dataset.DOMAINS``)
+    condition : a name of ``dataset.CONDITIONS`` (``clean``, ``sparse``, ``noisy``, ``outliers``)
+    count : number of test shapes, the first ``count`` of ``dataset.test_seeds(domain, count)``
+    seed : seed of the metric's surface sampling (the shapes and inputs are fixed by their own
+        seeds)
+    samples : area-weighted samples per mesh for the metrics
+    progress : callable ``(fraction, message)`` or None
+    name : the method's name in the result; default ``method.__name__``
+    dataset : module-like object with ``test_seeds``, ``make_shape``, ``make_input`` and optional
+        ``crop_to_input``; default :mod:`engine.bench.dataset` (tests pass a small stand-in).
+        The method is given ``PointCloud(points)`` only (no normals, no colours).
+    crop_max_dist : distance of the rooms crop (unit frame)
+    pass_ground_truth : call ``method(cloud, gt)`` instead; only for :func:`ground_truth`, the
+        sampling floor (a perfect reconstruction's scores)
+
+    Returns
+    -------
+    dict
+        ``method``, ``domain``, ``condition``, ``count``, ``seed``, ``samples``, ``protocol``
+        (str), ``memory_measure``, ``environment`` (versions), ``shapes`` (one dict per shape:
+        ``shape_seed``, ``points``, ``seconds``, ``cpu_seconds``, ``peak_rss_mb``,
+        ``peak_delta_mb``, ``failed``, ``error``, ``empty``, ``pred_faces`` and the metric keys)
+        and ``summary`` (see :func:`summarize`).
+    """
+    dataset = dataset or _default_dataset()
+    name = name or getattr(method, "__name__", "method")
+    crop = getattr(dataset, "crop_to_input", None) if domain in CROP_DOMAINS else None
+    shape_seeds = list(dataset.test_seeds(domain, count))[:count]
+    rows: List[dict] = []
+    measure = None
+    for index, shape_seed in enumerate(shape_seeds):
+        if progress is not None:
+            progress(index / max(len(shape_seeds), 1), f"{name} {domain}/{condition} "
+                     f"shape {index + 1}/{len(shape_seeds)}")
+        gt = dataset.make_shape(domain, shape_seed)
+        cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
+        visible = None
+        if crop is not None:
+            visible = dataset.make_input(gt, domain, "clean", shape_seed).points
+        row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False,
+               "error": None}
+        pred = None
+        cpu_start = time.process_time()
+        with PeakMemory() as memory:
+            start = time.perf_counter()
+            try:
+                pred = method(cloud, gt) if pass_ground_truth else method(cloud)
+            except Exception as error:  # the benchmark counts every failure, whatever it is
+                row.update(failed=True, error=f"{type(error).__name__}: {error}")
+            seconds = time.perf_counter() - start
+        row.update(seconds=seconds, cpu_seconds=time.process_time() - cpu_start,
+                   peak_rss_mb=memory.peak_mb, peak_delta_mb=memory.delta_mb)
+        measure = memory.measure
+        if pred is None:
+            row.update(_worst_scores(), empty=True, pred_faces=0)
+        else:
+            scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible, cloud.points)
+            row.update({key: scores[key] for key in METRIC_KEYS},
+                       empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
+        rows.append(row)
+    if progress is not None:
+        progress(1.0, f"{name} {domain}/{condition} done")
+
+    protocol = (f"metrics in the GT unit frame, {samples} area-weighted samples per mesh, "
+                f"sampling seed {seed}")
+    if crop is not None:
+        protocol += (f"; GT cropped to faces within {crop_max_dist} of the clean scan, prediction "
+                     f"to faces within {crop_max_dist} of its input (dataset.crop_to_input)")
+    elif domain in CROP_DOMAINS:
+        protocol += "; no crop (dataset has no crop_to_input): unseen GT faces count as missed"
+    return {
+        "method": name, "domain": domain, "condition": condition, "count": len(rows),
+        "seed": seed, "samples": samples, "protocol": protocol, "memory_measure": measure,
+        "environment": environment(), "shapes": rows, "summary": summarize(rows),
+    }
+
+
+def ground_truth(cloud: PointCloud, gt: Mesh) -> Mesh:
+    """The 'method' that returns the ground truth: its scores are the sampling floor.
+
+    Run it with ``run_benchmark(ground_truth, ..., pass_ground_truth=True)``.
+    """
+    return gt
+
+
+def _mean(values: Sequence[float]) -> Optional[float]:
+    return float(np.mean(values)) if len(values) else None
+
+
+def summarize(rows: Sequence[dict]) -> dict:
+    """Aggregates of per-shape rows.
+
+    Returns
+    -------
+    dict
+        ``n``, ``failed`` (the method raised), ``empty`` (no surface, including failed),
+        ``scored`` (shapes with a surface); ``cd_l1_x100`` and ``cd_l2``: means over the scored
+        shapes (None when none), ``cd_l1_x100_all``: mean over all shapes (inf when any shape has
+        no surface); F-scores and ``nc``: means over all shapes, a shape without surface counting
+        0; ``seconds``: mean wall seconds per shape; ``peak_rss_mb``: the largest per-shape peak;
+        ``peak_delta_mb``: the largest per-shape increase.
+    """
+    scored = [row for row in rows if not row["empty"]]
+    summary = {
+        "n": len(rows),
+        "failed": sum(bool(row["failed"]) for row in rows),
+        "empty": sum(bool(row["empty"]) for row in rows),
+        "scored": len(scored),
+        "cd_l1_x100": _mean([row["cd_l1_x100"] for row in scored]),
+        "cd_l2": _mean([row["cd_l2"] for row in scored]),
+        "cd_l1_x100_all": _mean([row["cd_l1_x100"] for row in rows]),
+    }
+    for key in METRIC_KEYS[2:]:
+        summary[key] = _mean([row[key] for row in rows])
+    summary["seconds"] = _mean([row["seconds"] for row in rows])
+    summary["peak_rss_mb"] = max((row["peak_rss_mb"] for row in rows), default=None)
+    summary["peak_delta_mb"] = max((row["peak_delta_mb"] for row in rows), default=None)
+    return summary
+
+
+def environment() -> dict:
+    """Versions and machine facts that bear on the numbers."""
+    info = {"python": platform.python_version(), "numpy": np.__version__,
+            "machine": platform.machine(), "cpus": os.cpu_count(),
+            "omp_num_threads": os.environ.get("OMP_NUM_THREADS")}
+    open3d = sys.modules.get("open3d")
+    if open3d is not None:
+        info["open3d"] = open3d.__version__
+    return info
+
+
+# --------------------------------------------------------------------------------------------
+# Output
+
+
+def _fmt(value, digits: int) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float) and not math.isfinite(value):
+        return "inf"
+    return f"{value:.{digits}f}"
+
+
+TABLE_HEADER = ("| method | domain | condition | N | failed | CD-L1 ×10² | F1@0.005 | F1@0.01 "
+                "| NC | s/shape | peak MB |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def table_row(result: dict) -> str:
+    """One markdown row of a :func:`run_benchmark` result."""
+    s = result["summary"]
+    failed = str(s["failed"])
+    if s["empty"] > s["failed"]:
+        failed += f" (+{s['empty'] - s['failed']} empty)"
+    return (f"| {result['method']} | {result['domain']} | {result['condition']} | {s['n']} "
+            f"| {failed} | {_fmt(s['cd_l1_x100'], 3)} | {_fmt(s[f1_key(0.005)], 3)} "
+            f"| {_fmt(s[f1_key(0.01)], 3)} | {_fmt(s['nc'], 3)} | {_fmt(s['seconds'], 1)} "
+            f"| {_fmt(s['peak_rss_mb'], 0)} |")
+
+
+def format_table(results: Sequence[dict]) -> str:
+    """A markdown table, one row per result (method × domain × condition).
+
+    CD is the mean over shapes that produced a surface; F-scores and NC are means over all shapes
+    (a failed or empty shape counts 0); ``failed`` counts shapes where the method raised (and,
+    in brackets, those where it returned no surface).
+    """
+    return "\n".join([TABLE_HEADER] + [table_row(result) for result in results])
+
+
+def _strict(value):
+    """``value`` with non-finite floats replaced by None, so the JSON stays strict."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {key: _strict(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(item) for item in value]
+    return value
+
+
+def result_filename(result: dict) -> str:
+    """``<method>_<domain>_<condition>.json``."""
+    return f"{result['method']}_{result['domain']}_{result['condition']}.json"
+
+
+def write_json(result: dict, out_dir: str) -> str:
+    """Write ``result`` as strict JSON (inf → null) into ``out_dir``; return the file path."""
+    os.makedirs(out_dir, exist_ok=True)
+    path = os.path.join(out_dir, result_filename(result))
+    with open(path, "w") as handle:
+        json.dump(_strict(result), handle, indent=1, allow_nan=False)
+        handle.write("\n")
+    return path

@@ -1,0 +1,194 @@
+"""``python -m engine bench``: run a reconstruction method over benchmark shapes, print a table.
+
+One row per domain × condition; each row's full result (per-shape metrics, timings, memory) is
+written as JSON to ``--out`` (``<method>_<domain>_<condition>.json``). ``--table`` runs every
+radius mode of ``ours`` instead and prints Table I (rows fixed, curvature, learned; per domain
+CD-L1 ×10², F1@0.005, F1@0.01, NC), one table per condition; a mode the engine has not built yet
+is reported as 'not available'.
+
+Examples::
+
+    python -m engine bench --method poisson --domain all --condition clean --count 20
+    python -m engine bench --method ours --radius-mode fixed --domain cars --condition noisy
+    python -m engine bench --table --condition clean --count 20
+    python -m engine bench --method poisson --report     # table of the JSON files in --out
+"""
+
+import sys
+
+CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
+DOMAIN_NAMES = ("cars", "garments", "rooms")
+TABLE_MODES = ("fixed", "curvature", "learned")
+
+
+def add_arguments(parser) -> None:
+    """Register the command's arguments on an ``argparse`` parser."""
+    parser.add_argument("--method", default="ours",
+                        help="poisson, ours, nearest-udf, or ground-truth (the GT itself: the "
+                             "metrics' sampling floor) (default ours)")
+    parser.add_argument("--radius-mode", default="fixed",
+                        help="radius mode of ours: fixed, curvature or learned (default fixed)")
+    parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("all",))
+    parser.add_argument("--condition", default="all", choices=CONDITION_NAMES + ("all",))
+    parser.add_argument("--count", type=int, default=20, help="test shapes per domain (default 20)")
+    parser.add_argument("--samples", type=int, default=100_000,
+                        help="metric samples per mesh (default 100000)")
+    parser.add_argument("--seed", type=int, default=0, help="metric sampling seed (default 0)")
+    parser.add_argument("--resolution", type=int, default=256,
+                        help="grid resolution of ours (default 256)")
+    parser.add_argument("--device", default="auto", help="device of ours: auto, cpu or cuda")
+    parser.add_argument("--out", default="bench_results",
+                        help="folder for the JSON results (default bench_results)")
+    parser.add_argument("--table", action="store_true",
+                        help="run each radius mode of ours and print Table I")
+    parser.add_argument("--report", action="store_true",
+                        help="run nothing: print the table of the JSON results already in --out")
+    parser.add_argument("--quiet", action="store_true", help="no per-shape progress on stderr")
+
+
+def _selected(value: str, names):
+    return list(names) if value == "all" else [value]
+
+
+def _progress(quiet: bool):
+    if quiet:
+        return None
+
+    def report(fraction: float, message: str) -> None:
+        print(f"[{fraction * 100:5.1f}%] {message}", file=sys.stderr, flush=True)
+
+    return report
+
+
+def _build(args, name: str, radius_mode: str):
+    from ..bench.methods import make_method
+
+    if name in ("ours", "nearest-udf"):
+        options = {"resolution": args.resolution, "device": args.device}
+        if name == "ours":
+            options["radius_mode"] = radius_mode
+        return make_method(name, **options)
+    return make_method(name)
+
+
+def run(args) -> int:
+    """Run the benchmark(s), print the markdown table(s), write the JSON files."""
+    from ..bench.harness import format_table, ground_truth, run_benchmark, write_json
+    from ..bench.methods import METHODS, MethodUnavailable
+    from ..errors import InputError
+
+    if args.count < 1:
+        raise InputError("--count must be at least 1")
+    if args.method not in METHODS and args.method != "ground-truth":
+        raise InputError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
+    domains = _selected(args.domain, DOMAIN_NAMES)
+    conditions = _selected(args.condition, CONDITION_NAMES)
+    progress = _progress(args.quiet)
+
+    if args.report:
+        return _report(args, domains, conditions)
+    if args.table:
+        return _run_table(args, domains, conditions, progress)
+
+    oracle = args.method == "ground-truth"
+    try:
+        method = ground_truth if oracle else _build(args, args.method, args.radius_mode)
+    except MethodUnavailable as error:
+        print(f"{args.method}: not available: {error}", file=sys.stderr)
+        return 1
+    results = []
+    for condition in conditions:
+        for domain in domains:
+            result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
+                                   samples=args.samples, progress=progress,
+                                   name="ground-truth" if oracle else None,
+                                   pass_ground_truth=oracle)
+            path = write_json(result, args.out)
+            print(f"wrote {path}", file=sys.stderr)
+            results.append(result)
+    print(format_table(results))
+    return 0
+
+
+def _report(args, domains, conditions) -> int:
+    """Print the table of the results in ``--out`` for the selected method, domains, conditions."""
+    import json
+    import os
+
+    from ..bench.harness import format_table
+
+    name = args.method
+    if name == "ours" and args.radius_mode != "fixed":
+        name = f"ours-{args.radius_mode}"
+    results, missing = [], []
+    for condition in conditions:
+        for domain in domains:
+            path = os.path.join(args.out, f"{name}_{domain}_{condition}.json")
+            if os.path.exists(path):
+                with open(path) as handle:
+                    results.append(json.load(handle))
+            else:
+                missing.append(path)
+    print(format_table(results))
+    for path in missing:
+        print(f"missing: {path}", file=sys.stderr)
+    return 0 if results else 1
+
+
+def _run_table(args, domains, conditions, progress) -> int:
+    """Table I: one row per radius mode of ``ours``, columns per domain."""
+    from ..bench.harness import run_benchmark, write_json
+    from ..bench.methods import MethodUnavailable
+
+    for condition in conditions:
+        cells = {}
+        for mode in TABLE_MODES:
+            try:
+                method = _build(args, "ours", mode)
+            except MethodUnavailable as error:
+                cells[mode] = f"not available ({error})"
+                continue
+            cells[mode] = {}
+            for domain in domains:
+                result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
+                                       samples=args.samples, progress=progress)
+                print(f"wrote {write_json(result, args.out)}", file=sys.stderr)
+                cells[mode][domain] = result
+        print(format_table_one(cells, domains, condition, args.count, args.samples))
+        print()
+    return 0
+
+
+def format_table_one(cells: dict, domains, condition: str, count: int, samples: int) -> str:
+    """Table I as markdown: rows = radius modes, 4 metric columns per domain.
+
+    Parameters
+    ----------
+    cells : dict mode -> (dict domain -> run_benchmark result) or a 'not available' string
+    domains : the domains, in column order
+    condition, count, samples : stated in the caption
+    """
+    from ..bench.harness import _fmt
+
+    keys = (("cd_l1_x100", 3), ("f1_0.005", 3), ("f1_0.01", 3), ("nc", 3))
+    head = "| radius mode | " + " | ".join(
+        f"{d} CD-L1 ×10² | {d} F1@0.005 | {d} F1@0.01 | {d} NC" for d in domains) + " |"
+    rule = "|---|" + "---|" * (4 * len(domains))
+    lines = [f"Table I ({condition}, {count} shapes per domain, {samples} samples per mesh)",
+             "", head, rule]
+    for mode, cell in cells.items():
+        if isinstance(cell, str):
+            lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (4 * len(domains) - 1))
+                         + " |")
+            continue
+        values = []
+        for domain in domains:
+            summary = cell[domain]["summary"]
+            failed = summary["empty"]
+            for key, digits in keys:
+                text = _fmt(summary[key], digits)
+                if key == "cd_l1_x100" and failed:
+                    text += f" ({failed} failed)"
+                values.append(text)
+        lines.append(f"| {mode} | " + " | ".join(values) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,290 @@
+"""Proofs for the benchmark harness: scoring, failures, aggregates, table, JSON, determinism, CLI.
+
+A tiny stand-in dataset (two octahedron-based spheres) keeps these fast and independent of
+``engine.bench.dataset``; one test also runs the real dataset when it exists.
+"""
+
+import json
+import math
+import types
+
+import numpy as np
+import pytest
+
+from engine.bench import harness
+from engine.bench.harness import (METRIC_KEYS, PeakMemory, format_table, run_benchmark,
+                                  summarize, write_json)
+from engine.geometry import Mesh, PointCloud
+from engine.metrics import evaluate
+from engine.sampling import sample_surface
+
+SAMPLES = 4000
+
+
+def sphere(subdivisions: int = 3, radius: float = 0.5) -> Mesh:
+    """An octahedron subdivided ``subdivisions`` times and pushed onto a sphere."""
+    vertices = [np.array(v, dtype=np.float64) for v in
+                [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]]
+    faces = [(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4),
+             (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)]
+    for _ in range(subdivisions):
+        midpoint = {}
+
+        def middle(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in midpoint:
+                vertices.append(0.5 * (vertices[a] + vertices[b]))
+                midpoint[key] = len(vertices) - 1
+            return midpoint[key]
+
+        new_faces = []
+        for a, b, c in faces:
+            ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
+            new_faces += [(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)]
+        faces = new_faces
+    v = np.array(vertices)
+    v = radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+    return Mesh(v, np.array(faces, dtype=np.int64))
+
+
+def fake_dataset(crop=False):
+    """A module-like stand-in for engine.bench.dataset: spheres of seed-dependent squash."""
+
+    def make_shape(domain, seed):
+        mesh = sphere()
+        return Mesh(mesh.vertices * np.array([1.0, 1.0, 0.6 + 0.1 * seed]), mesh.faces)
+
+    def make_input(gt, domain, condition, seed):
+        points, _, _ = sample_surface(gt.vertices, gt.faces, 2000, np.random.default_rng(seed))
+        return PointCloud(points)
+
+    def crop_to_input(mesh, points, max_dist):
+        from scipy.spatial import cKDTree
+        dist, _ = cKDTree(points).query(mesh.vertices)
+        keep = (dist[mesh.faces] <= max_dist).all(axis=1)
+        return Mesh(mesh.vertices, mesh.faces[keep])
+
+    module = types.SimpleNamespace(
+        DOMAINS=("cars", "garments", "rooms"),
+        test_seeds=lambda domain, count=100: list(range(count)),
+        make_shape=make_shape, make_input=make_input)
+    if crop:
+        module.crop_to_input = crop_to_input
+    return module
+
+
+def run(method, count=2, domain="cars", **kwargs):
+    return run_benchmark(method, domain, "clean", count, samples=SAMPLES,
+                         dataset=kwargs.pop("dataset", fake_dataset()), **kwargs)
+
+
+def test_ground_truth_method_scores_the_sampling_floor():
+    dataset = fake_dataset()
+    result = run(harness.ground_truth, dataset=dataset, pass_ground_truth=True, name="gt")
+    summary = result["summary"]
+    assert result["method"] == "gt" and result["count"] == 2 and len(result["shapes"]) == 2
+    assert summary["failed"] == 0 and summary["empty"] == 0 and summary["scored"] == 2
+    # exactly what evaluate gives a mesh against itself at 4000 samples per mesh
+    gt = dataset.make_shape("cars", 1)
+    floor = evaluate(gt, gt, samples=SAMPLES, seed=0)
+    assert all(result["shapes"][1][key] == floor[key] for key in METRIC_KEYS)
+    assert summary["cd_l1_x100"] < 1.5 and summary["nc"] > 0.95
+    for row in result["shapes"]:
+        assert row["seconds"] >= 0 and row["peak_rss_mb"] > 0 and row["points"] == 2000
+        assert set(METRIC_KEYS) <= set(row)
+
+
+def test_empty_mesh_scores_worst_and_counts_empty():
+    empty = lambda cloud: Mesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))  # noqa: E731
+    summary = run(empty)["summary"]
+    assert summary["failed"] == 0 and summary["empty"] == 2 and summary["scored"] == 0
+    assert summary["cd_l1_x100"] is None and math.isinf(summary["cd_l1_x100_all"])
+    assert summary["f1_0.005"] == 0.0 and summary["nc"] == 0.0
+
+
+def test_raising_method_is_counted_failed_not_skipped():
+    calls = []
+
+    def flaky(cloud):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("solver diverged")
+        return sphere()
+
+    result = run(flaky)
+    summary = result["summary"]
+    assert summary["n"] == 2 and summary["failed"] == 1 and summary["scored"] == 1
+    bad = result["shapes"][1]
+    assert bad["failed"] and bad["error"] == "RuntimeError: solver diverged"
+    assert math.isinf(bad["cd_l1_x100"]) and bad["f1_0.01"] == 0.0
+    # F1 is averaged over both shapes, the failure counting 0
+    assert summary["f1_0.01"] == pytest.approx(0.5 * result["shapes"][0]["f1_0.01"])
+    assert "1 |" in format_table([result]).splitlines()[2]
+
+
+def test_results_repeat_exactly():
+    first = run(lambda cloud: sphere(2))
+    second = run(lambda cloud: sphere(2))
+    for a, b in zip(first["shapes"], second["shapes"]):
+        assert all(a[key] == b[key] for key in METRIC_KEYS)
+
+
+def test_rooms_are_cropped_to_the_input_when_the_dataset_can():
+    # a prediction with an extra far-away square: the crop removes it, so it costs nothing
+    def with_extra(cloud):
+        mesh = sphere()
+        extra = np.array([[2.0, 2, 2], [2.1, 2, 2], [2.0, 2.1, 2]])
+        return Mesh(np.vstack([mesh.vertices, extra]),
+                    np.vstack([mesh.faces, len(mesh.vertices) + np.array([[0, 1, 2]])]))
+
+    cropped = run(with_extra, count=1, domain="rooms", dataset=fake_dataset(crop=True),
+                  crop_max_dist=0.05)
+    plain = run(with_extra, count=1, domain="cars", dataset=fake_dataset(crop=True))
+    assert "cropped" in cropped["protocol"] and "cropped" not in plain["protocol"]
+    assert cropped["shapes"][0]["f1_0.01"] > plain["shapes"][0]["f1_0.01"]
+
+
+def test_table_and_json(tmp_path):
+    result = run(lambda cloud: sphere(2), name="toy")
+    table = format_table([result]).splitlines()
+    assert table[0].startswith("| method | domain | condition | N | failed | CD-L1 ×10²")
+    assert len(table) == 3 and table[2].startswith("| toy | cars | clean | 2 | 0 |")
+    path = write_json(result, str(tmp_path / "out"))
+    assert path.endswith("toy_cars_clean.json")
+    with open(path) as handle:
+        data = json.load(handle)
+    assert data["summary"]["n"] == 2 and len(data["shapes"]) == 2
+    assert data["summary"]["cd_l1_x100"] == pytest.approx(result["summary"]["cd_l1_x100"])
+
+
+def test_json_writes_inf_as_null(tmp_path):
+    failing = lambda cloud: (_ for _ in ()).throw(ValueError("no"))  # noqa: E731
+    result = run(failing, count=1, name="broken")
+    with open(write_json(result, str(tmp_path))) as handle:
+        text = handle.read()
+    assert "Infinity" not in text
+    data = json.loads(text)
+    assert data["shapes"][0]["cd_l1_x100"] is None and data["summary"]["failed"] == 1
+
+
+def test_summary_of_no_rows():
+    summary = summarize([])
+    assert summary["n"] == 0 and summary["cd_l1_x100"] is None and summary["peak_rss_mb"] is None
+
+
+def test_peak_memory_sees_native_allocations():
+    with PeakMemory() as memory:
+        block = np.ones(40_000_000 // 8)  # 40 MB allocated by numpy's C code
+        del block
+    if memory.measure.startswith("VmHWM"):
+        assert memory.delta_mb > 30
+    assert memory.peak_mb > 0
+
+
+def test_cli_prints_a_table_and_writes_json(tmp_path, monkeypatch, capsys):
+    from engine.__main__ import main
+    from engine.bench import methods
+
+    dataset = fake_dataset()
+    monkeypatch.setattr(harness, "_default_dataset", lambda: dataset)
+    def toy(cloud):
+        return sphere(2)
+
+    monkeypatch.setitem(methods.METHODS, "toy", lambda **options: toy)
+    code = main(["bench", "--method", "toy", "--domain", "garments", "--condition", "clean",
+                 "--count", "1", "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "| garments | clean | 1 | 0 |" in out
+    assert (tmp_path / "toy_garments_clean.json").exists()
+    # --report rebuilds the same table from the JSON file, running nothing
+    code = main(["bench", "--method", "toy", "--domain", "garments", "--condition", "clean",
+                 "--out", str(tmp_path), "--report"])
+    assert code == 0 and capsys.readouterr().out == out
+
+
+def test_table_one_reports_missing_modes():
+    from engine.commands.bench import format_table_one
+
+    result = run(lambda cloud: sphere(2), name="ours")
+    text = format_table_one({"fixed": {"cars": result}, "learned": "not available (no weights)"},
+                            ["cars"], "clean", 2, SAMPLES)
+    lines = text.splitlines()
+    assert lines[2].startswith("| radius mode | cars CD-L1 ×10² | cars F1@0.005")
+    assert lines[4].startswith("| fixed | ") and lines[5].startswith("| learned | not available")
+
+
+def test_real_dataset_smoke():
+    dataset = pytest.importorskip("engine.bench.dataset")
+    gt = dataset.make_shape("garments", dataset.test_seeds("garments", 1)[0])
+    result = run_benchmark(lambda cloud: gt, "garments", "clean", 1, samples=SAMPLES)
+    floor = evaluate(gt, gt, samples=SAMPLES, seed=0)
+    assert result["summary"]["failed"] == 0
+    assert all(result["shapes"][0][key] == floor[key] for key in METRIC_KEYS)
+
+
+def test_method_gets_points_only():
+    seen = []
+
+    def spy(cloud):
+        seen.append((cloud.normals, cloud.colors, cloud.points.shape))
+        return sphere(1)
+
+    dataset = fake_dataset()
+    original = dataset.make_input
+    dataset.make_input = lambda *a: PointCloud(original(*a).points, np.ones((2000, 3)))
+    run(spy, count=1, dataset=dataset)
+    assert seen == [(None, None, (2000, 3))]
+
+
+def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
+    from engine.__main__ import main
+    from engine.bench import methods
+
+    def fake_ours(radius_mode="fixed", **options):
+        if radius_mode == "learned":
+            raise methods.MethodUnavailable("no selector weights")
+
+        def ours(cloud):
+            return sphere(2)
+
+        ours.__name__ = "ours" if radius_mode == "fixed" else f"ours-{radius_mode}"
+        return ours
+
+    dataset = fake_dataset()
+    monkeypatch.setattr(harness, "_default_dataset", lambda: dataset)
+    monkeypatch.setitem(methods.METHODS, "ours", fake_ours)
+    code = main(["bench", "--table", "--domain", "cars", "--condition", "clean", "--count", "1",
+                 "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.startswith("| fixed | ") for line in lines)
+    assert any(line.startswith("| curvature | ") for line in lines)
+    assert any(line.startswith("| learned | not available (no selector weights)") for line in lines)
+    assert (tmp_path / "ours-curvature_cars_clean.json").exists()
+
+
+def test_registry_reports_unavailable_methods():
+    from engine.bench import methods
+
+    with pytest.raises(KeyError):
+        methods.make_method("no-such-method")
+    try:
+        method = methods.make_method("nearest-udf", resolution=64)
+    except methods.MethodUnavailable:
+        return  # the engine has no nearest UDF yet: reported, not crashed
+    assert method.__name__ == "nearest-udf"
+
+
+def test_poisson_is_deterministic_and_closes_a_sphere():
+    pytest.importorskip("open3d")
+    from engine.bench.methods import make_method
+
+    gt = sphere(4)
+    points, _, _ = sample_surface(gt.vertices, gt.faces, 3000, np.random.default_rng(0))
+    poisson = make_method("poisson", depth=6)
+    first, second = poisson(PointCloud(points)), poisson(PointCloud(points))
+    assert np.array_equal(first.vertices, second.vertices)
+    assert np.array_equal(first.faces, second.faces)
+    scores = evaluate(first, gt, samples=SAMPLES, seed=0)
+    assert scores["cd_l1_x100"] < 2.0 and scores["nc"] > 0.9
