@@ -1,12 +1,22 @@
 """Screenshots of the N-panel in a real, windowed Blender: idle, running, and with the result.
 
     xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup \\
-        --python tools/blender_screenshots.py -- CLOUD_FILE docs/
+        --python tools/blender_screenshots.py -- CLOUD_FILE docs/ [RESOLUTION]
 
 It drives the real modal path: the Reconstruct operator is invoked as the button does
 (``INVOKE_DEFAULT`` in the 3D view), a timer waits for progress and then for the result, ``import
 -window root`` (ImageMagick) takes the shots, then Ctrl-Z's operator is run and the result must be
 gone. Prints ``SCREENSHOTS OK`` and exits 0 when everything happened, else exits 1.
+
+What makes the shots read well (each was a problem once):
+- the splash is switched off in the preferences before Blender shows it (``--python`` runs first);
+- the 3D view is maximized (Ctrl+Space) and the sidebar is opened on the "Reconstruct" tab through
+  ``Region.active_panel_category``, not by clicking (Xvfb has no window manager, so synthetic
+  keys and clicks are unreliable);
+- the cloud stays selected: a mesh of loose vertices is drawn only as points in Object Mode, black
+  when unselected (invisible on the dark grid), orange when selected; the theme's vertex size
+  makes the points larger;
+- for the result the cloud is hidden and the mesh is shown in Solid mode with a studio light.
 """
 
 import importlib
@@ -20,12 +30,21 @@ from pathlib import Path
 import addon_utils
 import bpy
 import numpy as np
+from mathutils import Euler
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "bl_ext.udfr_shots.udf_reconstruction"
-cloud_path, out_dir = sys.argv[sys.argv.index("--") + 1:][:2]
+ARGS = sys.argv[sys.argv.index("--") + 1:]
+cloud_path, out_dir = ARGS[:2]
+RESOLUTION = int(ARGS[2]) if len(ARGS) > 2 else 96
 OUT = Path(out_dir)
+NAME = "Cloud"
 state = {"phase": "setup", "started": time.time()}
+
+# Before Blender opens its first window: no splash (it would cover every shot), larger UI text.
+bpy.context.preferences.view.show_splash = False
+bpy.context.preferences.view.ui_scale = 1.25
+bpy.context.preferences.themes[0].view_3d.vertex_size = 2
 
 
 def log(message):
@@ -43,9 +62,15 @@ def enable_extension():
 
 def view3d():
     window = bpy.context.window_manager.windows[0]
-    area = next(a for a in window.screen.areas if a.type == 'VIEW_3D')
+    area = max((a for a in window.screen.areas if a.type == 'VIEW_3D'),
+               key=lambda a: a.width * a.height)
     region = next(r for r in area.regions if r.type == 'WINDOW')
     return window, area, region
+
+
+def sidebar():
+    _, area, _ = view3d()
+    return next(r for r in area.regions if r.type == 'UI')
 
 
 def shot(name):
@@ -66,33 +91,46 @@ def setup():
     bridge = importlib.import_module(PACKAGE + ".operators.bridge")
     assert extension is not None
 
-    for obj in list(bpy.data.objects):
-        if obj.type == 'MESH':
-            bpy.data.objects.remove(obj)
+    for obj in list(bpy.data.objects):  # the factory cube, camera and light
+        bpy.data.objects.remove(obj)
     cloud = io.read_point_cloud(cloud_path)
     points = cloud.points - cloud.points.mean(axis=0)
     points *= 2.0 / np.ptp(points, axis=0).max()
-    height = (points[:, 1] - points[:, 1].min()) / np.ptp(points[:, 1])
-    colors = np.c_[0.9 - 0.6 * height, 0.35 + 0.3 * height, 0.2 + 0.7 * height]
     empty = np.zeros((0, 3), dtype=np.int64)
     context = bpy.context
-    source = bridge.new_mesh_object(context, geometry.Mesh(points, empty, colors=colors),
-                                    "Bunny", np.eye(4))
+    source = bridge.new_mesh_object(context, geometry.Mesh(points, empty), NAME, np.eye(4))
     source.rotation_euler = (np.pi / 2, 0.0, 0.0)  # the file is y-up
     source.location = (0.0, 0.0, 1.0)
+    context.view_layer.objects.active = source
+    source.select_set(True)  # selected loose vertices are drawn orange; unselected, black
 
-    context.scene.udf_reconstruction.resolution = 96
-    context.preferences.view.ui_scale = 1.2
+    context.scene.udf_reconstruction.resolution = RESOLUTION
+    window, area, region = view3d()
+    with context.temp_override(window=window, area=area, region=region):
+        bpy.ops.screen.screen_full_area()  # Ctrl+Space: the 3D view fills the window
     window, area, region = view3d()
     space = area.spaces.active
     space.show_region_ui = True
-    space.shading.color_type = 'VERTEX'  # the active colour attribute
+    space.shading.type = 'SOLID'
+    space.shading.light = 'STUDIO'
+    space.shading.color_type = 'MATERIAL'
     space.overlay.show_stats = False
-    source.select_set(False)  # active is enough; an orange cloud hides the panel's point
+    space.overlay.show_floor = True
     with context.temp_override(window=window, area=area, region=region):
+        view = space.region_3d
+        view.view_perspective = 'PERSP'
+        view.view_rotation = Euler((np.radians(72), 0.0, np.radians(35))).to_quaternion()
         bpy.ops.view3d.view_selected()
         bpy.ops.ed.undo_push(message="Add cloud")
-    log(f"cloud ready: {len(points)} points")
+    log(f"cloud ready: {len(points)} points, resolution {RESOLUTION}")
+
+
+def open_tab():
+    region = sidebar()
+    region.active_panel_category = "Reconstruct"
+    view3d()[1].tag_redraw()
+    log(f"sidebar tab: {region.active_panel_category}")
+    return region.active_panel_category == "Reconstruct"
 
 
 def tick():
@@ -103,13 +141,15 @@ def tick():
     if phase == "setup":
         setup()
         state["phase"] = "tab"
-        return 3.0
+        return 1.0
     if phase == "tab":
-        # Close the splash and open the sidebar's Reconstruct tab (4th tab; factory layout at
-        # 1600x900 with a UI scale of 1.2), as a user would.
-        subprocess.run(["xdotool", "key", "Escape"], check=True)
-        subprocess.run(["xdotool", "mousemove", "1305", "308", "click", "1"], check=True)
-        subprocess.run(["xdotool", "mousemove", "700", "450"], check=True)
+        if not open_tab():
+            log("could not open the Reconstruct tab")
+            finish(1)
+        # Out of the way (no hover highlight). The sidebar keeps its default width: dragging its
+        # edge with xdotool did not resize it, so the progress bar's long stage text is elided
+        # in the middle; the status bar shows it in full.
+        subprocess.run(["xdotool", "mousemove", "10", "890"], check=False)
         state["phase"] = "idle"
         return 2.0
     if phase == "idle":
@@ -137,19 +177,21 @@ def tick():
     if phase == "wait":
         if job is not None:
             return 0.5
-        if "Bunny_mesh" not in bpy.data.objects:
+        result = bpy.data.objects.get(NAME + "_mesh")
+        if result is None:
             log("no result object")
             finish(1)
-        bpy.data.objects["Bunny"].hide_set(True)
+        log(f"result: {len(result.data.polygons):,} faces")
+        bpy.data.objects[NAME].hide_set(True)
         state["phase"] = "result"
-        return 1.0
+        return 1.5
     if phase == "result":
         shot("blender_result.png")
-        bpy.data.objects["Bunny"].hide_set(False)
+        bpy.data.objects[NAME].hide_set(False)
         window, area, region = view3d()
         with bpy.context.temp_override(window=window, area=area, region=region):
             bpy.ops.ed.undo()  # one step: Reconstruct
-        gone = "Bunny_mesh" not in bpy.data.objects and "Bunny" in bpy.data.objects
+        gone = NAME + "_mesh" not in bpy.data.objects and NAME in bpy.data.objects
         log(f"after undo the result is {'gone' if gone else 'still there'}")
         log("SCREENSHOTS OK" if gone else "undo failed")
         finish(0 if gone else 1)
