@@ -133,7 +133,7 @@ def test_cuda_is_refused_clearly_without_a_gpu():
 def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
     torch = pytest.importorskip("torch")
     from engine.backbone import build_backbone_torch, load_backbone_numpy, save_backbone
-    from engine.field import _predict_trimmed
+    from engine.field import predict_trimmed
     from engine.patches import gather_patches
 
     torch.manual_seed(0)
@@ -146,5 +146,5 @@ def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
     rel, mask, counts = rel[keep], mask[keep], counts[keep]
     assert counts.min() < 16 and counts.max() < 64
     whole = network.predict(rel, mask)
-    trimmed = _predict_trimmed(network.predict, rel, mask, counts, group_size=256)
+    trimmed = predict_trimmed(network.predict, rel, mask, counts, group_size=256)
     np.testing.assert_allclose(trimmed, whole, rtol=1e-5, atol=1e-6)
