@@ -1,7 +1,7 @@
 """The Reconstruct and Cancel operators.
 
 One :class:`Job` runs the engine on numpy copies of the object's points. From the N-panel
-(``invoke``) it runs on a worker thread that never touches bpy, while a 0.1 s modal timer shows
+(``invoke``) it runs on a worker thread that never touches bpy, while a 0.25 s modal timer shows
 its progress and Esc or the Cancel button sets its stop flag; from scripts and ``blender -b``
 (``execute``) it runs to the end before returning. Either way the new object is made on the main
 thread only once the engine has finished, so a cancel or an error leaves the scene untouched.
@@ -16,6 +16,9 @@ import bpy
 from ..engine.errors import Cancelled, InputError
 from ..ui.properties import scene_settings, to_settings
 from . import bridge
+
+# How often the modal operator looks at the worker's progress (seconds).
+TIMER_SECONDS = 0.25
 
 _job = None  # the running Job, if any: one reconstruction at a time
 
@@ -136,10 +139,14 @@ def finish_job(operator, context, job: Job) -> set:
 
 
 def _redraw_panels(context) -> None:
+    """Redraw only the sidebars of the 3D views: redrawing the viewport itself (all the points)
+    on every tick takes the interpreter lock from the worker and slows it down severalfold."""
     for window in context.window_manager.windows:
         for area in window.screen.areas:
             if area.type == 'VIEW_3D':
-                area.tag_redraw()
+                for region in area.regions:
+                    if region.type == 'UI':
+                        region.tag_redraw()
 
 
 class UDFR_OT_reconstruct(bpy.types.Operator):
@@ -193,7 +200,9 @@ class UDFR_OT_reconstruct(bpy.types.Operator):
         except ImportError as error:
             return _report_failure(self, error)
         job.start_thread()
-        self._timer = context.window_manager.event_timer_add(0.1, window=context.window)
+        self._timer = context.window_manager.event_timer_add(TIMER_SECONDS,
+                                                             window=context.window)
+        self._shown = None
         context.window_manager.modal_handler_add(self)
         return {'RUNNING_MODAL'}
 
@@ -204,11 +213,13 @@ class UDFR_OT_reconstruct(bpy.types.Operator):
             return {'RUNNING_MODAL'}
         if event.type != 'TIMER':
             return {'PASS_THROUGH'}
-        _redraw_panels(context)
         if job.running:
             text = f"Reconstructing '{job.source_name}': {job.message} ({job.fraction:.0%})"
-            context.workspace.status_text_set(
-                text + (" - cancelling" if job.stop.is_set() else " - Esc to cancel"))
+            text += " - cancelling" if job.stop.is_set() else " - Esc to cancel"
+            if text != self._shown:  # redraw only when there is something new to show
+                self._shown = text
+                context.workspace.status_text_set(text)
+                _redraw_panels(context)
             return {'PASS_THROUGH'}
         self._stop_timer(context)
         return finish_job(self, context, job)

@@ -12,6 +12,7 @@ Examples::
     python -m engine bench --method ours --radius-mode fixed --domain cars --condition noisy
     python -m engine bench --table --condition clean --count 20
     python -m engine bench --method poisson --report     # table of the JSON files in --out
+    python -m engine bench --table --report --condition clean   # Table I from those files
 """
 
 import sys
@@ -42,7 +43,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--table", action="store_true",
                         help="run each radius mode of ours and print Table I")
     parser.add_argument("--report", action="store_true",
-                        help="run nothing: print the table of the JSON results already in --out")
+                        help="run nothing: print the table (with --table, Table I) of the JSON results "
+                             "already in --out")
     parser.add_argument("--quiet", action="store_true", help="no per-shape progress on stderr")
 
 
@@ -85,10 +87,10 @@ def run(args) -> int:
     conditions = _selected(args.condition, CONDITION_NAMES)
     progress = _progress(args.quiet)
 
-    if args.report:
-        return _report(args, domains, conditions)
     if args.table:
         return _run_table(args, domains, conditions, progress)
+    if args.report:
+        return _report(args, domains, conditions)
 
     oracle = args.method == "ground-truth"
     try:
@@ -135,14 +137,34 @@ def _report(args, domains, conditions) -> int:
     return 0 if results else 1
 
 
+def _load_result(args, method: str, domain: str, condition: str):
+    """A result written earlier to ``--out``, or None."""
+    import json
+    import os
+
+    path = os.path.join(args.out, f"{method}_{domain}_{condition}.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as handle:
+        return json.load(handle)
+
+
 def _run_table(args, domains, conditions, progress) -> int:
-    """Table I: one row per radius mode of ``ours``, columns per domain."""
+    """Table I: one row per radius mode of ``ours``, columns per domain. With ``--report`` the
+    table is assembled from the JSON results already in ``--out`` (runs done one at a time)."""
     from ..bench.harness import run_benchmark, write_json
     from ..bench.methods import MethodUnavailable
 
     for condition in conditions:
         cells = {}
         for mode in TABLE_MODES:
+            if args.report:
+                name = "ours" if mode == "fixed" else f"ours-{mode}"
+                found = {d: _load_result(args, name, d, condition) for d in domains}
+                missing = [d for d, r in found.items() if r is None]
+                cells[mode] = (f"not run ({', '.join(missing)} missing in {args.out})" if missing
+                               else found)
+                continue
             try:
                 method = _build(args, "ours", mode)
             except MethodUnavailable as error:
@@ -172,16 +194,17 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
 
     keys = (("cd_l1_x100", 3), ("f1_0.005", 3), ("f1_0.01", 3), ("nc", 3))
     head = "| radius mode | " + " | ".join(
-        f"{d} CD-L1 ×10² | {d} F1@0.005 | {d} F1@0.01 | {d} NC" for d in domains) + " |"
-    rule = "|---|" + "---|" * (4 * len(domains))
+        f"{d} CD-L1 ×10² | {d} F1@0.005 | {d} F1@0.01 | {d} NC" for d in domains) + " | s/shape |"
+    rule = "|---|" + "---|" * (4 * len(domains) + 1)
     lines = [f"Table I ({condition}, {count} shapes per domain, {samples} samples per mesh)",
              "", head, rule]
     for mode, cell in cells.items():
         if isinstance(cell, str):
-            lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (4 * len(domains) - 1))
+            lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (4 * len(domains)))
                          + " |")
             continue
         values = []
+        seconds = [cell[d]["summary"]["seconds"] for d in domains]
         for domain in domains:
             summary = cell[domain]["summary"]
             failed = summary["empty"]
@@ -190,5 +213,6 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
                 if key == "cd_l1_x100" and failed:
                     text += f" ({failed} failed)"
                 values.append(text)
+        values.append(_fmt(sum(seconds) / len(seconds), 1))
         lines.append(f"| {mode} | " + " | ".join(values) + " |")
     return "\n".join(lines)

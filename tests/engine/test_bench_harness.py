@@ -262,6 +262,14 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     assert any(line.startswith("| curvature | ") for line in lines)
     assert any(line.startswith("| learned | not available (no selector weights)") for line in lines)
     assert (tmp_path / "ours-curvature_cars_clean.json").exists()
+    # --report assembles the same rows from the JSON files, running nothing
+    fixed_row = next(line for line in lines if line.startswith("| fixed | "))
+    code = main(["bench", "--table", "--report", "--domain", "cars", "--condition", "clean",
+                 "--count", "1", "--samples", str(SAMPLES), "--out", str(tmp_path)])
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert fixed_row in lines
+    assert any(line.startswith("| learned | not run (cars missing") for line in lines)
 
 
 def test_registry_reports_unavailable_methods():
