@@ -13,9 +13,12 @@ policy's choice). A band node whose ball holds fewer than ``MIN_PATCH_POINTS`` p
 nearest-point distance instead: an empty ball says nothing (the nearest point is farther than
 r), and one or two points at the rim of the ball cannot tell the network where the surface
 runs (LoSF-UDF likewise skips balls with fewer than 6 points). The nearest-point distance is
-an upper bound of the UDF when the points lie on the surface. Every other node
-is farther than R from all input points and holds R: the field is the UDF truncated at R, which
-is all the mesher needs, as its iso-level (at most 2 spacings) stays below R.
+an upper bound of the UDF when the points lie on the surface. Band nodes farther than
+``NETWORK_BAND_NODES`` spacings from every input point also keep their nearest-point distance:
+the mesher's iso-level is at most 2 spacings and its vertices end on the zero level, so only the
+nodes near the surface need the network's accuracy (at resolution 256 this skips about a third
+of the band). Every other node is farther than R from all input points and holds R: the field is
+the UDF truncated at R, which is all the mesher needs.
 
 ``udf_source="nearest"`` replaces the network by the distance to the nearest input point: the
 non-learned baseline, exact on the band up to the sampling gaps of the cloud.
@@ -38,6 +41,9 @@ from .settings import ReconstructSettings
 UDF_SOURCES = ("network", "nearest")
 # Balls with fewer points use the nearest-point distance (see the module docstring).
 MIN_PATCH_POINTS = 3
+# Band nodes farther than this many spacings from every input point keep the nearest-point
+# distance (an upper bound) instead of the network's value: above the mesher's iso-level (<= 2).
+NETWORK_BAND_NODES = 3.0
 # Margin beyond the band radius on each side of the grid, in nodes.
 MARGIN_NODES = 3
 # The band is at least this many spacings wide, so that the mesher sees a few nodes of true
@@ -61,7 +67,8 @@ class BandField:
     grid : UDFGrid
         The field as a sparse band, unit frame; ``far_value`` (= band radius) elsewhere.
     stats : dict
-        ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``, ``sparse_balls`` (band
+        ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``, ``network_queries`` (band
+        nodes within ``NETWORK_BAND_NODES`` spacings of a point), ``sparse_balls`` (such
         nodes whose ball held fewer than ``MIN_PATCH_POINTS`` points: not sent to the network),
         ``mean_patch_points`` (over the balls the network saw),
         ``udf_source``, ``device`` (``cpu``, ``cuda``, ``custom`` predictor or ``none``),
@@ -245,8 +252,12 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
 
     started = time.perf_counter()
     if use_network:
-        values = _network_values(points, tree, origin + indices * spacing, nearest, settings,
-                                 predictor, progress, cancel, stats)
+        near = nearest <= NETWORK_BAND_NODES * spacing
+        stats["network_queries"] = int(near.sum())
+        values = nearest.astype(np.float32)
+        values[near] = _network_values(points, tree, origin + indices[near] * spacing,
+                                       nearest[near], settings, predictor, progress, cancel,
+                                       stats)
     else:
         values = nearest.astype(np.float32)
     stats["seconds_udf"] = time.perf_counter() - started

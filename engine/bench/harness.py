@@ -50,6 +50,7 @@ CROP_DOMAINS = ("rooms",)
 DEFAULT_CROP_MAX_DIST = 0.01
 _CLEAR_REFS = "/proc/self/clear_refs"
 _STATUS = "/proc/self/status"
+_RESET_SLACK_KB = 4096
 
 
 # --------------------------------------------------------------------------------------------
@@ -73,9 +74,12 @@ def _reset_peak() -> bool:
     try:
         with open(_CLEAR_REFS, "w") as clear:
             clear.write("5")
-        return _status_kb("VmHWM") is not None
     except OSError:
         return False
+    # Some kernels and sandboxes accept the write and ignore it: trust the reset only when the
+    # peak really came down to the current RSS.
+    peak, current = _status_kb("VmHWM"), _status_kb("VmRSS")
+    return peak is not None and current is not None and peak <= current + _RESET_SLACK_KB
 
 
 class PeakMemory:
