@@ -2,14 +2,21 @@
 #   make test-blender BLENDER=../shared/tools/real-blender/blender
 #   make test-blender-gui BLENDER="../shared/tools/real-blender/shell.sh xvfb-run -a blender"
 #   make build                      # dist/udf_reconstruction-<version>-linux_x64.zip
+#   make check-new-user BLENDER="../shared/tools/real-blender/shell.sh xvfb-run -a -s '-screen 0 1600x900x24' blender"
 
 BLENDER ?= blender
 PYTHON ?= .venv/bin/python
 PYTEST_ARGS ?= tests/blender -q
 # A throw-away Blender configuration inside the checkout (reachable from a chroot too).
 USER_RESOURCES := $(CURDIR)/.cache/blender-user
+# check-new-user: a second throw-away configuration, the cloud it imports, where the shots go.
+NEW_USER_RESOURCES := $(CURDIR)/.cache/blender-newuser
+NEW_USER_CLOUD ?= ../shared/data/real/cgal/b9_training.ply
+NEW_USER_SHOTS ?= $(CURDIR)/.cache/new-user
+NEW_USER_RESOLUTION ?= 64
+VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
 
-.PHONY: test-blender test-blender-gui test-bpy build build-lean clean-user
+.PHONY: test-blender test-blender-gui test-bpy build build-lean clean-user check-new-user
 
 test-blender: clean-user
 	BLENDER_USER_RESOURCES=$(USER_RESOURCES) $(BLENDER) -b --factory-startup \
@@ -30,3 +37,12 @@ build-lean:
 
 clean-user:
 	rm -rf $(USER_RESOURCES)
+
+# Install the lean zip into a fresh user configuration of a windowed Blender, import a PLY,
+# reconstruct, cancel, reconstruct, undo (tools/blender_new_user.py). Needs a window: xvfb-run.
+check-new-user: build-lean
+	rm -rf $(NEW_USER_RESOURCES)
+	BLENDER_USER_RESOURCES=$(NEW_USER_RESOURCES) $(BLENDER) --factory-startup \
+	    --python-exit-code 1 --python tools/blender_new_user.py -- \
+	    dist/udf_reconstruction-$(VERSION).zip $(NEW_USER_CLOUD) $(NEW_USER_SHOTS) \
+	    $(NEW_USER_RESOLUTION)

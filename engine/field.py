@@ -72,7 +72,8 @@ class BandField:
         nodes whose ball held fewer than ``MIN_PATCH_POINTS`` points: not sent to the network),
         ``mean_patch_points`` (over the balls the network saw),
         ``udf_source``, ``device`` (``cpu``, ``cuda``, ``custom`` predictor or ``none``),
-        ``seconds_band``, ``seconds_udf``.
+        ``seconds_band``, ``seconds_udf``, ``seconds_radius`` (the part of ``seconds_udf``
+        spent choosing radii: the selector or the curvature estimate).
     """
 
     grid: UDFGrid
@@ -282,10 +283,13 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     values = np.empty(len(queries), dtype=np.float32)
     sparse = 0
     total_points = 0
+    seconds_radius = 0.0
     for start in range(0, len(queries), batch):
         check_cancel(cancel)
         stop = min(start + batch, len(queries))
+        mark = time.perf_counter()
         radii = radii_for_queries(settings, tree, points, queries[start:stop])
+        seconds_radius += time.perf_counter() - mark
         rel, mask, counts = gather_patches(tree, points, queries[start:stop], radii, MAX_POINTS)
         chunk = nearest[start:stop].astype(np.float32)
         seen = np.flatnonzero(counts >= MIN_PATCH_POINTS)
@@ -297,6 +301,7 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
         progress(0.1 + 0.9 * stop / len(queries),
                  f"network UDF: {stop:,} / {len(queries):,} queries")
     stats["sparse_balls"] = sparse
+    stats["seconds_radius"] = seconds_radius
     stats["mean_patch_points"] = total_points / max(len(queries) - sparse, 1)
     return values
 

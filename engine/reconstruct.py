@@ -141,7 +141,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings["total"] = time.perf_counter() - started
 
     stats = {"points": int(len(points_unit)), **band.stats,
-             "queries": (band.stats["band_nodes"] - band.stats["sparse_balls"]
+             "queries": (band.stats["network_queries"] - band.stats["sparse_balls"]
                          if udf_source == "network" else 0),
              "iso": float(meshed.iso), "components": _piece_count(result_mesh),
              "vertices": int(len(result_mesh.vertices)), "faces": int(len(result_mesh.faces)),

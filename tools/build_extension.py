@@ -40,7 +40,7 @@ PLATFORM_TAGS = {
 NOT_BUNDLED = {"numpy", "torch"}
 # What gets copied for staging; Blender's build then applies the manifest's exclude patterns.
 STAGE_SKIP = {".venv", ".git", ".cache", ".pytest_cache", "dist", "build", "out", "wheels",
-              "tests", "docs", "tools", "benchmarks", "__pycache__"}
+              "tests", "docs", "tools", "benchmarks", "bench_results", "__pycache__"}
 
 
 def bundled_requirements() -> list:

@@ -138,15 +138,18 @@ def _report(args, domains, conditions) -> int:
 
 
 def _load_result(args, method: str, domain: str, condition: str):
-    """A result written earlier to ``--out``, or None."""
+    """A result written earlier to ``--out``, cut to its first ``--count`` shapes; None when
+    missing or shorter."""
     import json
     import os
+
+    from ..bench.harness import first_shapes
 
     path = os.path.join(args.out, f"{method}_{domain}_{condition}.json")
     if not os.path.exists(path):
         return None
     with open(path) as handle:
-        return json.load(handle)
+        return first_shapes(json.load(handle), args.count)
 
 
 def _run_table(args, domains, conditions, progress) -> int:
@@ -162,8 +165,8 @@ def _run_table(args, domains, conditions, progress) -> int:
                 name = "ours" if mode == "fixed" else f"ours-{mode}"
                 found = {d: _load_result(args, name, d, condition) for d in domains}
                 missing = [d for d, r in found.items() if r is None]
-                cells[mode] = (f"not run ({', '.join(missing)} missing in {args.out})" if missing
-                               else found)
+                cells[mode] = (f"not run ({', '.join(missing)}: no result with {args.count} "
+                               f"shapes in {args.out})" if missing else found)
                 continue
             try:
                 method = _build(args, "ours", mode)

@@ -55,7 +55,8 @@ def test_built_zip_ships_only_the_extension_and_installs(extension, tmp_path):
     assert {"blender_manifest.toml", "__init__.py", "LICENSE", "operators/bridge.py",
             "engine/reconstruct.py", "scripts/batch_reconstruct.py"} <= set(names)
     assert not [n for n in names if n.startswith(("tests/", "docs/", "tools/", ".",
-                                                  "engine/training/"))
+                                                  "engine/training/", "bench_results/",
+                                                  "examples/", "benchmarks/"))
                 or "__pycache__" in n or "/." in n]
 
     extension.disable()  # the installed copy registers the same classes

@@ -269,7 +269,28 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     assert code == 0
     lines = capsys.readouterr().out.splitlines()
     assert fixed_row in lines
-    assert any(line.startswith("| learned | not run (cars missing") for line in lines)
+    assert any(line.startswith("| learned | not run (cars: no result with 1 shapes")
+               for line in lines)
+    # a table asks for more shapes than were run: not run, never a mean over fewer shapes
+    code = main(["bench", "--table", "--report", "--domain", "cars", "--condition", "clean",
+                 "--count", "2", "--samples", str(SAMPLES), "--out", str(tmp_path)])
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.startswith("| fixed | not run (cars: no result with 2 shapes")
+               for line in lines)
+
+
+def test_first_shapes_recomputes_the_summary():
+    from engine.bench.harness import first_shapes
+
+    rows = [{"empty": False, "failed": False, "cd_l1_x100": cd, "cd_l2": cd, "f1_0.005": 1.0,
+             "f1_0.01": 1.0, "nc": 1.0, "seconds": 1.0, "peak_rss_mb": 1.0, "peak_delta_mb": 0.0}
+            for cd in (1.0, 3.0, 8.0)]
+    result = {"count": 3, "shapes": rows, "summary": summarize(rows)}
+    assert result["summary"]["cd_l1_x100"] == pytest.approx(4.0)
+    first = first_shapes(result, 2)
+    assert first["count"] == 2 and first["summary"]["cd_l1_x100"] == pytest.approx(2.0)
+    assert result["summary"]["cd_l1_x100"] == pytest.approx(4.0)  # the input is unchanged
+    assert first_shapes(result, 4) is None
 
 
 def test_registry_reports_unavailable_methods():
