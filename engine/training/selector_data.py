@@ -4,8 +4,9 @@ backbone's UDF error at each candidate radius, cached on disk one file per shape
 Shapes come from the benchmark's *training* seeds (disjoint from its test seeds by
 construction). Each shape is scanned under one of the clean / sparse / noisy conditions (chosen
 by its seed), so the selector sees the densities and noise where the radius matters most.
-Queries are drawn uniformly in the union of the balls of the largest candidate radius around the
-input points: the same region as the field's query band.
+Queries are drawn uniformly within ``QUERY_BAND`` of random input points: the grid nodes where
+the field calls the network (``NETWORK_BAND_NODES`` spacings at the default resolution 256).
+Farther nodes keep the nearest-point distance whatever the radius, so they teach nothing.
 """
 
 from pathlib import Path
@@ -14,7 +15,7 @@ from typing import Callable, Dict
 import numpy as np
 
 from ..bench.dataset import make_input, make_shape
-from ..field import predict_trimmed
+from ..field import NETWORK_BAND_NODES, predict_trimmed
 from ..frame import UnitFrame
 from ..patches import MAX_POINTS, gather_patches
 from ..selector import parent_features
@@ -22,6 +23,7 @@ from .mesh_distance import point_mesh_distance
 from .radius_targets import CANDIDATE_RADII
 
 TRAINING_CONDITIONS = ("clean", "sparse", "noisy")
+QUERY_BAND = NETWORK_BAND_NODES / 256
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -57,7 +59,7 @@ def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[s
     frame = UnitFrame.from_points(cloud.points)
     points = frame.to_unit(cloud.points)
     rng = np.random.default_rng([query_seed, seed, 11])
-    q = band_queries(points, queries, float(CANDIDATE_RADII[-1]), rng)
+    q = band_queries(points, queries, QUERY_BAND, rng)
     udf = point_mesh_distance(frame.to_unit(gt.vertices), gt.faces, q, rng)
     return {"points": points, "queries": q, "udf": udf, "tree": cKDTree(points),
             "condition": condition}
@@ -66,7 +68,7 @@ def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[s
 def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent_radius: float,
                 cache_dir: Path, query_seed: int = 0) -> Dict[str, np.ndarray]:
     """Selector inputs and error curves for one shape; read from ``cache_dir`` when present."""
-    path = Path(cache_dir) / f"{domain}_{seed}_{queries}_{query_seed}.npz"
+    path = Path(cache_dir) / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}.npz"
     if path.exists():
         with np.load(path) as data:
             return {k: data[k] for k in data.files}

@@ -76,7 +76,7 @@ def train(args, data):
             loss.backward()
             optimiser.step()
             schedule.step()
-            total += float(loss)
+            total += loss.item()
         print(f"epoch {epoch + 1}/{args.epochs} loss {total / steps_per_epoch:.5f}", flush=True)
     return model
 
