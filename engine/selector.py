@@ -87,19 +87,29 @@ class NumpySelector:
         t = self._linear(np.maximum(t, 0), name + ".fc1")
         return t + self._linear(x, name + ".shortcut", bias=False)
 
+    def _pooled_block(self, x, pooled, name):
+        """The block on [x, pooled] (b, n, 2H) without building it: each weight matrix is split
+        into its x rows and its pooled rows, and the pooled part is computed once per patch."""
+        b, n, h = x.shape
+        w0, ws = self.p[name + ".fc0.weight"], self.p[name + ".shortcut.weight"]
+        per_patch = np.maximum(pooled, 0) @ w0[h:] + self.p[name + ".fc0.bias"]   # (b, H)
+        t = (np.maximum(x, 0).reshape(b * n, h) @ w0[:h]).reshape(b, n, -1)
+        t = np.maximum(t + per_patch[:, None], 0).reshape(b * n, -1)
+        t = self._linear(t, name + ".fc1").reshape(b, n, -1)
+        t += (x.reshape(b * n, h) @ ws[:h]).reshape(b, n, -1)
+        t += (pooled @ ws[h:])[:, None]
+        return t
+
     def _forward(self, rel, mask, extra):
         b, n, _ = rel.shape
         h = self.config["hidden"]
         pad = np.where(mask, np.float32(0), np.float32(-np.inf))[:, :, None]
         net = self._linear(rel.reshape(b * n, 3), "pos")                  # (b*n, 2H)
-        for k in range(self.config["blocks"]):
-            if k:
-                pooled = (net.reshape(b, n, h) + pad).max(axis=1)
-                net = np.concatenate([net.reshape(b, n, h),
-                                      np.broadcast_to(pooled[:, None], (b, n, h))], axis=2)
-                net = net.reshape(b * n, 2 * h)
-            net = self._block(net, f"block{k}")                           # (b*n, H)
-        pooled = (net.reshape(b, n, h) + pad).max(axis=1)
+        net = self._block(net, "block0").reshape(b, n, h)                 # (b, n, H)
+        for k in range(1, self.config["blocks"]):
+            pooled = (net + pad).max(axis=1)                              # (b, H)
+            net = self._pooled_block(net, pooled, f"block{k}")            # (b, n, H)
+        pooled = (net + pad).max(axis=1)
         code = self._linear(np.maximum(pooled, 0), "code")                # (b, 256)
         z = np.concatenate([code, extra], axis=1)
         for k in range(len(self.config["mlp"])):
