@@ -118,11 +118,17 @@ class NumpySelector:
         return (0.5 * (1.0 + np.tanh(0.5 * z))).astype(np.float32)  # overflow-free sigmoid
 
     def predict_unit(self, rel, mask, extra, batch_size: int = 4096) -> np.ndarray:
+        """s per query. Padding columns never change it (the pools are masked) but cost as much
+        as points: queries go in order of point count, each batch cut to its largest count."""
         rel = np.asarray(rel, dtype=np.float32)
+        mask = np.asarray(mask, dtype=bool)
         out = np.empty(rel.shape[0], dtype=np.float32)
-        for start in range(0, rel.shape[0], batch_size):
-            stop = start + batch_size
-            out[start:stop] = self._forward(rel[start:stop], mask[start:stop], extra[start:stop])
+        counts = mask.sum(axis=1)
+        order = np.argsort(counts, kind="stable")
+        for start in range(0, len(order), batch_size):
+            batch = order[start:start + batch_size]
+            width = max(int(counts[batch].max()), 1)
+            out[batch] = self._forward(rel[batch, :width], mask[batch, :width], extra[batch])
         return out
 
 
