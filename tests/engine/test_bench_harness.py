@@ -174,8 +174,10 @@ def test_summary_of_no_rows():
 
 def test_peak_memory_sees_native_allocations():
     with PeakMemory() as memory:
-        block = np.ones(40_000_000 // 8)  # 40 MB allocated by numpy's C code
-        del block
+        block = np.ones(40_000_000 // 8)  # 40 MB written by numpy's C code
+        # Still alive when the block ends: the kernel records the high-water mark of memory
+        # already freed only at some events, and a run under load showed it missed once.
+    del block
     if memory.measure.startswith("VmHWM"):
         assert memory.delta_mb > 30
     assert memory.peak_mb > 0
