@@ -175,9 +175,9 @@ def test_summary_of_no_rows():
 def test_peak_memory_sees_native_allocations():
     import mmap
 
-    # Fresh pages from the kernel, written by numpy's C code. Not np.ones: once bpy is imported
-    # (the Blender tests run first) malloc is jemalloc, which hands back pages it kept resident,
-    # so a 40 MB array need not raise the RSS at all.
+    # Fresh pages from the kernel, written by numpy's C code. Not np.ones: an allocator may hand
+    # back pages it kept resident, and in full runs (Blender tests first, bpy loaded) a 40 MB
+    # array twice did not raise the RSS at all.
     block = mmap.mmap(-1, 40_000_000)
     with PeakMemory() as memory:
         np.frombuffer(block, dtype=np.uint8)[:] = 1
