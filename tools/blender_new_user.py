@@ -33,13 +33,15 @@ Prints ``NEW USER FLOW OK`` and exits 0 when all of that held, else exits 1. It 
 
 import importlib
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import addon_utils
 import bpy
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from blender_window import finish, screenshot, sidebar, view3d  # noqa: E402
 
 ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 if len(ARGS) < 3:
@@ -73,25 +75,6 @@ def check(condition, message):
         raise Failed(message)
 
 
-def finish(code):
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
-
-
-def view3d():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == 'VIEW_3D'),
-               key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == 'WINDOW')
-    return window, area, region
-
-
-def sidebar():
-    _, area, _ = view3d()
-    return next(r for r in area.regions if r.type == 'UI')
-
-
 def in_view3d():
     window, area, region = view3d()
     return bpy.context.temp_override(window=window, area=area, region=region)
@@ -100,7 +83,7 @@ def in_view3d():
 def shot(name):
     SHOTS.mkdir(parents=True, exist_ok=True)
     path = SHOTS / name
-    subprocess.run(["import", "-window", "root", str(path)], check=True)
+    screenshot(path)
     log(f"screenshot {path}")
 
 

@@ -20,7 +20,6 @@ What makes the shots read well (each was a problem once):
 """
 
 import importlib
-import os
 import subprocess
 import sys
 import tempfile
@@ -31,6 +30,9 @@ import addon_utils
 import bpy
 import numpy as np
 from mathutils import Euler
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from blender_window import finish, screenshot, sidebar, view3d  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "bl_ext.udfr_shots.udf_reconstruction"
@@ -60,28 +62,10 @@ def enable_extension():
     return addon_utils.enable(PACKAGE, default_set=True)
 
 
-def view3d():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == 'VIEW_3D'),
-               key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == 'WINDOW')
-    return window, area, region
-
-
-def sidebar():
-    _, area, _ = view3d()
-    return next(r for r in area.regions if r.type == 'UI')
-
-
 def shot(name):
     path = OUT / name
-    subprocess.run(["import", "-window", "root", str(path)], check=True)
+    screenshot(path)
     log(f"wrote {path}")
-
-
-def finish(code):
-    sys.stdout.flush()
-    os._exit(code)
 
 
 def setup():
