@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import InputError
 from .meshing import UDFGrid
-from .patches import MAX_POINTS, QUERY_CHUNK, gather_patches
+from .patches import MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress
 from .radius import max_radius, radii_for_queries, require_policy
 from .settings import ReconstructSettings
@@ -316,11 +316,8 @@ def predict_trimmed(predictor: Predictor, rel: np.ndarray, mask: np.ndarray,
     largest count (at least ``MIN_WIDTH`` columns); ``cancel`` is checked between groups.
     """
     out = np.empty(len(counts), dtype=np.float64)
-    order = np.argsort(counts, kind="stable")
-    for start in range(0, len(order), group_size):
+    for group, width in groups_by_count(counts, group_size, MIN_WIDTH):
         check_cancel(cancel)
-        group = order[start:start + group_size]
-        width = max(int(counts[group].max()), MIN_WIDTH)
         out[group] = np.asarray(predictor(rel[group, :width], mask[group, :width]),
                                 dtype=np.float64).reshape(-1)
     return out

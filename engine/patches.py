@@ -6,7 +6,7 @@ The patch contract is shared by training and inference: for a query q and radius
 in ``mask``. A query with no point in its ball has ``counts == 0`` (a "far" query).
 """
 
-from typing import Tuple, Union
+from typing import Iterator, Tuple, Union
 
 import numpy as np
 
@@ -66,3 +66,17 @@ def gather_patches(tree, points: np.ndarray, queries: np.ndarray,
         mask[start:stop] = inside
     counts = mask.sum(axis=1).astype(np.int64)
     return rel, mask, counts
+
+
+def groups_by_count(counts: np.ndarray, group_size: int,
+                    min_width: int = 1) -> Iterator[Tuple[np.ndarray, int]]:
+    """Patches in order of point count, ``group_size`` at a time, each with the columns worth
+    computing: ``(indices, width)``, width = the group's largest count, at least ``min_width``.
+
+    Padding columns never change a masked network's output but cost as much as points; cutting
+    each group to its own width skips most of them.
+    """
+    order = np.argsort(counts, kind="stable")
+    for start in range(0, len(order), group_size):
+        group = order[start:start + group_size]
+        yield group, max(int(counts[group].max()), min_width)

@@ -22,7 +22,7 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from .patches import gather_patches
+from .patches import gather_patches, groups_by_count
 from .weights_file import read_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
@@ -123,11 +123,7 @@ class NumpySelector:
         rel = np.asarray(rel, dtype=np.float32)
         mask = np.asarray(mask, dtype=bool)
         out = np.empty(rel.shape[0], dtype=np.float32)
-        counts = mask.sum(axis=1)
-        order = np.argsort(counts, kind="stable")
-        for start in range(0, len(order), batch_size):
-            batch = order[start:start + batch_size]
-            width = max(int(counts[batch].max()), 1)
+        for batch, width in groups_by_count(mask.sum(axis=1), batch_size):
             out[batch] = self._forward(rel[batch, :width], mask[batch, :width], extra[batch])
         return out
 

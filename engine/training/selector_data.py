@@ -19,11 +19,12 @@ from ..field import NETWORK_BAND_NODES, predict_trimmed
 from ..frame import UnitFrame
 from ..patches import MAX_POINTS, gather_patches
 from ..selector import parent_features
+from ..settings import ReconstructSettings
 from .mesh_distance import point_mesh_distance
 from .radius_targets import CANDIDATE_RADII
 
 TRAINING_CONDITIONS = ("clean", "sparse", "noisy")
-QUERY_BAND = NETWORK_BAND_NODES / 256
+QUERY_BAND = NETWORK_BAND_NODES / ReconstructSettings().resolution
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
