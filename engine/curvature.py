@@ -16,9 +16,11 @@ curvature heuristic: Gaussian noise also raises sigma, so on noisy scans this po
 ball where a larger one would average the noise away (the learned selector can learn better).
 """
 
+from typing import Optional
+
 import numpy as np
 
-from .patches import gather_patches
+from .patches import Neighbours, gather_patches, patches_from_neighbours
 
 # Measured through a ball of R = 0.024 at benchmark density (~33k points per unit area): a
 # cylinder of radius 0.1 gives sigma = 0.002, radius 0.03 gives 0.013, radius 0.015 gives 0.065,
@@ -31,7 +33,7 @@ PARENT_POINTS = 64
 
 
 def surface_variation(tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
-                      ) -> tuple:
+                      neighbours: Optional[Neighbours] = None) -> tuple:
     """Surface variation of each query's parent ball.
 
     Parameters
@@ -40,13 +42,19 @@ def surface_variation(tree, points: np.ndarray, queries: np.ndarray, parent_radi
     points : (N, 3) float, unit frame
     queries : (Q, 3) float, unit frame
     parent_radius : float, R in the unit frame
+    neighbours : optional, the nearest points within R of each query (at least PARENT_POINTS
+        per list; see :func:`engine.patches.nearest_within`), when the caller has them already
 
     Returns
     -------
     sigma : (Q,) float64 in [0, 1/3]; 0 where the ball holds fewer than 3 points
     counts : (Q,) int64, points used per ball (at most PARENT_POINTS nearest)
     """
-    rel, mask, counts = gather_patches(tree, points, queries, parent_radius, PARENT_POINTS)
+    if neighbours is None:
+        rel, mask, counts = gather_patches(tree, points, queries, parent_radius, PARENT_POINTS)
+    else:
+        rel, mask, counts = patches_from_neighbours(points, queries, neighbours, parent_radius,
+                                                    PARENT_POINTS)
     weights = mask.astype(np.float64)
     n = np.maximum(counts, 1).astype(np.float64)
     mean = np.einsum("qk,qkc->qc", weights, rel) / n[:, None]
@@ -60,14 +68,15 @@ def surface_variation(tree, points: np.ndarray, queries: np.ndarray, parent_radi
 
 
 def curvature_radii(tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
-                    rho_min: float, rho_max: float) -> np.ndarray:
+                    rho_min: float, rho_max: float,
+                    neighbours: Optional[Neighbours] = None) -> np.ndarray:
     """Per-query ball radius in [rho_min * R, rho_max * R], smaller where sigma is larger.
 
     Returns
     -------
     (Q,) float64 radii in the unit frame
     """
-    sigma, counts = surface_variation(tree, points, queries, parent_radius)
+    sigma, counts = surface_variation(tree, points, queries, parent_radius, neighbours)
     t = np.clip((sigma - SIGMA_FLAT) / (SIGMA_DETAILED - SIGMA_FLAT), 0.0, 1.0)
     t[counts < MIN_POINTS] = 0.0
     rho = rho_max - (rho_max - rho_min) * t

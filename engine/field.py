@@ -33,9 +33,11 @@ import numpy as np
 
 from .errors import InputError
 from .meshing import UDFGrid
-from .patches import MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count
+from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
+                      patches_from_neighbours)
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress
-from .radius import max_radius, radii_for_queries, require_policy
+from .radius import (max_radius, parent_ball, radii_for_queries, reads_parent_ball,
+                     require_policy)
 from .settings import ReconstructSettings
 
 UDF_SOURCES = ("network", "nearest")
@@ -288,9 +290,18 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
         check_cancel(cancel)
         stop = min(start + batch, len(queries))
         mark = time.perf_counter()
-        radii = radii_for_queries(settings, tree, points, queries[start:stop])
+        batch_queries = queries[start:stop]
+        # the parent ball's lists also hold the backbone's patch: one k-d query serves both
+        parent = None
+        if reads_parent_ball(settings):
+            parent = parent_ball(settings, tree, batch_queries)
+        radii = radii_for_queries(settings, tree, points, batch_queries, parent)
         seconds_radius += time.perf_counter() - mark
-        rel, mask, counts = gather_patches(tree, points, queries[start:stop], radii, MAX_POINTS)
+        if parent is None:
+            rel, mask, counts = gather_patches(tree, points, batch_queries, radii, MAX_POINTS)
+        else:
+            rel, mask, counts = patches_from_neighbours(points, batch_queries, parent, radii,
+                                                        MAX_POINTS)
         chunk = nearest[start:stop].astype(np.float32)
         seen = np.flatnonzero(counts >= MIN_PATCH_POINTS)
         chunk[seen] = predict_trimmed(predictor, rel[seen], mask[seen], counts[seen],

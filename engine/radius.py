@@ -7,38 +7,39 @@ the selector's weights file is there; until then it is refused with a message th
 """
 
 import functools
-from typing import Callable, Dict
+from typing import Callable, Dict, Optional
 
 import numpy as np
 
 from .errors import InputError
+from .patches import Neighbours
 from .settings import ReconstructSettings
 
-RadiusPolicy = Callable[[ReconstructSettings, object, np.ndarray, np.ndarray], np.ndarray]
+RadiusPolicy = Callable[..., np.ndarray]
 
 
 def fixed_radii(settings: ReconstructSettings, tree, points: np.ndarray,
-                queries: np.ndarray) -> np.ndarray:
+                queries: np.ndarray, neighbours: Optional[Neighbours] = None) -> np.ndarray:
     """Every query gets ``settings.radius``: (Q,) float64, unit frame."""
     return np.full(len(queries), float(settings.radius), dtype=np.float64)
 
 
 def curvature_policy(settings: ReconstructSettings, tree, points: np.ndarray,
-                     queries: np.ndarray) -> np.ndarray:
+                     queries: np.ndarray, neighbours: Optional[Neighbours] = None) -> np.ndarray:
     """Smaller balls where the parent ball's surface variation is larger: (Q,) float64."""
     from .curvature import curvature_radii
 
     return curvature_radii(tree, points, queries, settings.parent_radius,
-                           settings.rho_min, settings.rho_max)
+                           settings.rho_min, settings.rho_max, neighbours)
 
 
 def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
-                   queries: np.ndarray) -> np.ndarray:
+                   queries: np.ndarray, neighbours: Optional[Neighbours] = None) -> np.ndarray:
     """The selector network's radius per query, in [rho_min R, rho_max R]: (Q,) float64."""
     from .selector import predict_radii
 
     return predict_radii(_shipped_selector(), tree, points, queries,
-                         settings.parent_radius, settings.rho_min, settings.rho_max)
+                         settings.parent_radius, settings.rho_min, settings.rho_max, neighbours)
 
 
 @functools.lru_cache(maxsize=1)
@@ -83,8 +84,25 @@ def max_radius(settings: ReconstructSettings) -> float:
     return float(settings.rho_max * settings.parent_radius)
 
 
+def reads_parent_ball(settings: ReconstructSettings) -> bool:
+    """Whether the policy of ``settings`` reads each query's parent ball (all but ``fixed``)."""
+    return settings.radius_mode != "fixed"
+
+
+def parent_ball(settings: ReconstructSettings, tree, queries: np.ndarray) -> Neighbours:
+    """The nearest points within the parent radius R of each query, as the policies read them.
+
+    The lists hold the selector's PARENT_POINTS (128) nearest, more than the curvature estimate
+    and the backbone's patch need: both are cut from them (:func:`patches_from_neighbours`).
+    """
+    from .selector import parent_neighbours
+
+    return parent_neighbours(tree, queries, settings.parent_radius)
+
+
 def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
-                      queries: np.ndarray) -> np.ndarray:
+                      queries: np.ndarray, neighbours: Optional[Neighbours] = None,
+                      ) -> np.ndarray:
     """The ball radius of each query under ``settings.radius_mode``.
 
     Parameters
@@ -98,6 +116,8 @@ def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
         Input points, unit frame.
     queries : (Q, 3) float array
         Query positions, unit frame.
+    neighbours : Neighbours, optional
+        The queries' :func:`parent_ball`, when the caller has it (looked up otherwise).
 
     Returns
     -------
@@ -109,5 +129,5 @@ def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
     InputError
         When the radius mode is not available yet.
     """
-    radii = require_policy(settings)(settings, tree, points, queries)
+    radii = require_policy(settings)(settings, tree, points, queries, neighbours)
     return np.minimum(radii, max_radius(settings))

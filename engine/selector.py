@@ -22,7 +22,7 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from .patches import gather_patches, groups_by_count
+from .patches import QUERY_CHUNK, Neighbours, groups_by_count, nearest_within, patches_from_neighbours
 from .weights_file import read_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
@@ -39,8 +39,12 @@ DEFAULT_CONFIG = {
 
 
 def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
+                    neighbours: Optional[Neighbours] = None,
                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the selector reads for each query.
+
+    ``neighbours``, when given, are the queries' :func:`parent_neighbours` (the field computes
+    them once for the selector and the backbone); otherwise they are looked up in ``tree``.
 
     Returns
     -------
@@ -48,16 +52,31 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     mask : (Q, PARENT_POINTS // STRIDE) bool
     extra : (Q, 1 + HISTOGRAM_BINS) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram]
     """
-    rel, mask, counts = gather_patches(tree, points, queries, parent_radius, PARENT_POINTS)
-    dist = np.sqrt(np.sum(rel.astype(np.float64) ** 2, axis=2))
-    shell = np.minimum((dist * HISTOGRAM_BINS).astype(np.int64), HISTOGRAM_BINS - 1)
-    hist = np.zeros((len(counts), HISTOGRAM_BINS))
-    for b in range(HISTOGRAM_BINS):
-        hist[:, b] = np.sum(mask & (shell == b), axis=1)
-    hist /= np.maximum(counts, 1)[:, None]
+    if neighbours is None:  # chunk by chunk: the lists take 2 kB per query
+        parts = [parent_features(tree, points, queries[start:start + QUERY_CHUNK], parent_radius,
+                                 parent_neighbours(tree, queries[start:start + QUERY_CHUNK],
+                                                   parent_radius))
+                 for start in range(0, max(len(queries), 1), QUERY_CHUNK)]
+        return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+    strided = Neighbours(neighbours.distance[:, :PARENT_POINTS:STRIDE],
+                         neighbours.index[:, :PARENT_POINTS:STRIDE])
+    rel, mask, _ = patches_from_neighbours(points, queries, strided, parent_radius,
+                                           PARENT_POINTS // STRIDE)
+    distance = neighbours.distance[:, :PARENT_POINTS]
+    rows, columns = np.nonzero(distance <= parent_radius)
+    counts = np.bincount(rows, minlength=len(distance))
+    shell = np.minimum((distance[rows, columns] / parent_radius * HISTOGRAM_BINS).astype(np.int64),
+                       HISTOGRAM_BINS - 1)
+    hist = np.bincount(rows * HISTOGRAM_BINS + shell, minlength=len(distance) * HISTOGRAM_BINS)
+    hist = hist.reshape(-1, HISTOGRAM_BINS) / np.maximum(counts, 1)[:, None]
     log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)
     extra = np.column_stack([log_count, hist]).astype(np.float32)
-    return rel[:, ::STRIDE], mask[:, ::STRIDE], extra
+    return rel, mask, extra
+
+
+def parent_neighbours(tree, queries: np.ndarray, parent_radius: float) -> Neighbours:
+    """The PARENT_POINTS nearest points within R of each query: the parent ball's lists."""
+    return nearest_within(tree, queries, parent_radius, PARENT_POINTS)
 
 
 def macs_per_query(config: Dict) -> int:
@@ -117,7 +136,7 @@ class NumpySelector:
         z = self._linear(z, "out")[:, 0]
         return (0.5 * (1.0 + np.tanh(0.5 * z))).astype(np.float32)  # overflow-free sigmoid
 
-    def predict_unit(self, rel, mask, extra, batch_size: int = 4096) -> np.ndarray:
+    def predict_unit(self, rel, mask, extra, batch_size: int = 512) -> np.ndarray:
         """s per query. Padding columns never change it (the pools are masked) but cost as much
         as points: queries go in order of point count, each batch cut to its largest count."""
         rel = np.asarray(rel, dtype=np.float32)
@@ -129,12 +148,14 @@ class NumpySelector:
 
 
 def predict_radii(selector, tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
-                  rho_min: float, rho_max: float) -> np.ndarray:
+                  rho_min: float, rho_max: float,
+                  neighbours: Optional[Neighbours] = None) -> np.ndarray:
     """Per-query radii r_hat = rho * R with rho in [rho_min, rho_max]; (Q,) float64, unit frame.
 
     A query whose parent ball is empty keeps rho_max (the backbone treats it as far anyway).
+    ``neighbours``: the queries' :func:`parent_neighbours`, when already at hand.
     """
-    rel, mask, extra = parent_features(tree, points, queries, parent_radius)
+    rel, mask, extra = parent_features(tree, points, queries, parent_radius, neighbours)
     s = np.ones(len(queries), dtype=np.float64)
     has_points = mask.any(axis=1)
     if np.any(has_points):

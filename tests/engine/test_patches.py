@@ -1,6 +1,7 @@
 """Patches follow the contract: nearest points within r, relative, scaled, sorted, padded."""
 
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
 from engine.patches import gather_patches
@@ -72,3 +73,29 @@ def test_chunks_give_the_same_patches(monkeypatch):
     chunked = gather_patches(tree, points, queries, 0.1)
     for a, b in zip(whole, chunked):
         np.testing.assert_array_equal(a, b)
+
+
+def test_patches_cut_from_a_larger_ball_equal_a_direct_gather():
+    # the field reads the backbone's patch (64 nearest within r) out of the parent ball's lists
+    # (128 nearest within R >= r) instead of a second k-d query: it must be the same patch
+    from engine.patches import nearest_within, patches_from_neighbours
+
+    points, queries = random_cloud(seed=5, n=20000)  # dense: many parent lists hit the cap
+    tree = cKDTree(points)
+    radii = np.random.default_rng(6).uniform(0.05, 0.15, len(queries))
+    parent = nearest_within(tree, queries, 0.15, 128)
+    assert np.isfinite(parent.distance).all(axis=1).any()  # some lists are full
+    cut = patches_from_neighbours(points, queries, parent, radii, 64)
+    direct = gather_patches(tree, points, queries, radii, 64)
+    assert direct[2].max() == 64
+    for a, b in zip(cut, direct):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_short_neighbour_lists_are_refused():
+    from engine.patches import nearest_within, patches_from_neighbours
+
+    points, queries = random_cloud(seed=7)
+    parent = nearest_within(cKDTree(points), queries, 0.1, 32)
+    with pytest.raises(ValueError, match="shorter"):
+        patches_from_neighbours(points, queries, parent, 0.1, 64)

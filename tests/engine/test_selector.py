@@ -72,3 +72,28 @@ def test_selector_is_small():
     parameters = sum(p.numel() for p in module.parameters())
     assert parameters < 100_000
     assert macs_per_query(DEFAULT_CONFIG) < 700_000
+
+
+def test_parent_features_match_a_brute_force_count_and_chunking(monkeypatch):
+    import engine.selector as selector_module
+    from engine.selector import PARENT_POINTS, parent_neighbours
+
+    points = _cloud(5, 20000)
+    queries = points[:300] + 0.002
+    tree = cKDTree(points)
+    rel, mask, extra = parent_features(tree, points, queries, 0.024)
+    for row in (0, 150, 299):
+        distance = np.sort(np.linalg.norm(points - queries[row], axis=1))
+        inside = distance[distance <= 0.024][:PARENT_POINTS]
+        assert extra[row, 0] == pytest.approx(np.log1p(len(inside)) / np.log1p(PARENT_POINTS))
+        shells = np.minimum((inside / 0.024 * 6).astype(int), 5)
+        np.testing.assert_allclose(extra[row, 1:], np.bincount(shells, minlength=6) / len(inside),
+                                   atol=1e-6)
+        assert mask[row].sum() == len(inside[::4])
+    # given lists (as the field passes them) and small chunks give the same features
+    given = parent_features(tree, points, queries, 0.024, parent_neighbours(tree, queries, 0.024))
+    monkeypatch.setattr(selector_module, "QUERY_CHUNK", 37)
+    chunked = parent_features(tree, points, queries, 0.024)
+    for a, b, c in zip((rel, mask, extra), given, chunked):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
