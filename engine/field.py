@@ -31,6 +31,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
+from .devices import resolve_device
 from .errors import InputError
 from .meshing import UDFGrid
 from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
@@ -149,33 +150,6 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
         nearest[start:stop] = distance
         check_cancel(cancel)
     return candidates[keep], nearest[keep]
-
-
-def resolve_device(device: str) -> str:
-    """``"cpu"`` or ``"cuda"`` for a settings device; ``auto`` picks CUDA when torch sees one.
-
-    Raises
-    ------
-    InputError
-        ``cuda`` was asked for but torch is not installed or sees no CUDA device.
-    """
-    if device == "cpu":
-        return "cpu"
-    import importlib.util
-
-    if importlib.util.find_spec("torch") is None:
-        if device == "cuda":
-            raise InputError("device 'cuda' needs PyTorch with CUDA, which is not installed; "
-                             "use device 'auto' or 'cpu'")
-        return "cpu"
-    import torch
-
-    if torch.cuda.is_available():
-        return "cuda"
-    if device == "cuda":
-        raise InputError("device 'cuda' was asked for but PyTorch sees no CUDA GPU; "
-                         "use device 'auto' or 'cpu'")
-    return "cpu"
 
 
 def backbone_predictor(device: str) -> Predictor:
