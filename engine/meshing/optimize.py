@@ -77,6 +77,29 @@ class _FieldQuery:
             self.pool.shutdown()
 
 
+class StallCheck:
+    """The early stop of stage 2: from iteration ``quiet`` on, every ``STALL_CHECK`` iterations,
+    stop once the mean and max vertex and centroid distances improve by less than ``STALL_MEAN``
+    / ``STALL_MAX`` voxels since the last check."""
+
+    def __init__(self, quiet: int, enabled: bool):
+        self.quiet = quiet
+        self.enabled = enabled
+        self.reference = None  # distance summary at the last check
+
+    def due(self, it: int) -> bool:
+        return self.enabled and it >= self.quiet and (it - self.quiet) % STALL_CHECK == 0
+
+    def stalled(self, summary: np.ndarray) -> bool:
+        """``summary``: mean and max vertex, mean and max centroid distance (see
+        :func:`_distance_summary`), taken at an iteration where :meth:`due` holds."""
+        previous, self.reference = self.reference, summary
+        if previous is None:
+            return False
+        gain = previous - summary
+        return gain[0::2].max() < STALL_MEAN and gain[1::2].max() < STALL_MAX
+
+
 def _distance_summary(dv: np.ndarray, dc: np.ndarray) -> np.ndarray:
     """Mean and max of the finite vertex and centroid distances (voxels)."""
     out = np.zeros(4)
@@ -145,7 +168,7 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
     n0 = c0 = None
     query = _FieldQuery(field, n + m)
     ran = 0
-    reference = None  # distance summary at the last convergence check
+    stall = StallCheck(quiet, early_stop)
     try:
         for it in range(iterations):
             if ran % 4 == 0:
@@ -154,13 +177,8 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
             cents = cen @ g
             dv, vv = query(g)
             dc, vc = query(cents)
-            if early_stop and it >= quiet and (it - quiet) % STALL_CHECK == 0:
-                now = _distance_summary(dv, dc)
-                if reference is not None:
-                    gain = reference - now
-                    if gain[0::2].max() < STALL_MEAN and gain[1::2].max() < STALL_MAX:
-                        break
-                reference = now
+            if stall.due(it) and stall.stalled(_distance_summary(dv, dc)):
+                break
             grad = _unit_inplace(vv, dv)
             face_grad = _unit_inplace(vc, dc)
             if it < stage2:

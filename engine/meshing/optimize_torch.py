@@ -14,7 +14,7 @@ import numpy as np
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
 from .grid_field import BRICK, UDFGrid
-from .optimize import STALL_CHECK, STALL_MAX, STALL_MEAN, OptimizeStats, learning_rate
+from .optimize import OptimizeStats, StallCheck, learning_rate
 
 _CELLS = BRICK ** 3
 
@@ -133,7 +133,7 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
     weight = torch.ones((n, 1), dtype=g.dtype, device=device)
     n0 = c0 = None
     ran = 0
-    reference = None
+    stall = StallCheck(quiet, early_stop)
     for it in range(iterations):
         if ran % 4 == 0:
             check_cancel(cancel)
@@ -141,13 +141,8 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
         cents = cen @ g
         dv, vv = query.closest_index(g)
         dc, vc = query.closest_index(cents)
-        if early_stop and it >= quiet and (it - quiet) % STALL_CHECK == 0:
-            now = _distance_summary(dv, dc)
-            if reference is not None:
-                gain = reference - now
-                if gain[0::2].max() < STALL_MEAN and gain[1::2].max() < STALL_MAX:
-                    break
-            reference = now
+        if stall.due(it) and stall.stalled(_distance_summary(dv, dc)):
+            break
         grad = _unit(vv, dv)
         face_grad = _unit(vc, dc)
         if it < stage2:
