@@ -11,6 +11,7 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
+from .devices import resolve_device
 from .errors import InputError
 from .patches import Neighbours
 from .settings import ReconstructSettings
@@ -38,16 +39,20 @@ def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
     """The selector network's radius per query, in [rho_min R, rho_max R]: (Q,) float64."""
     from .selector import predict_radii
 
-    return predict_radii(_shipped_selector(), tree, points, queries,
-                         settings.parent_radius, settings.rho_min, settings.rho_max, neighbours)
+    selector = _shipped_selector(resolve_device(settings.device))
+    return predict_radii(selector, tree, points, queries, settings.parent_radius,
+                         settings.rho_min, settings.rho_max, neighbours)
 
 
-@functools.lru_cache(maxsize=1)
-def _shipped_selector():
-    """The shipped selector, loaded once per process (the field asks batch after batch)."""
-    from .selector import load_selector_numpy
+@functools.lru_cache(maxsize=2)
+def _shipped_selector(device: str = "cpu"):
+    """The shipped selector, loaded once per process and device (the field asks batch after
+    batch): numpy on ``cpu``, torch on ``cuda``."""
+    from .selector import TorchSelector, load_selector_numpy, load_selector_torch
 
-    return load_selector_numpy()
+    if device == "cpu":
+        return load_selector_numpy()
+    return TorchSelector(load_selector_torch(device=device), device)
 
 
 def learned_available() -> bool:

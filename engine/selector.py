@@ -224,6 +224,26 @@ def load_selector_numpy(path: Union[str, Path, None] = None) -> NumpySelector:
     return NumpySelector(params, header["config"])
 
 
+class TorchSelector:
+    """The torch selector behind :class:`NumpySelector`'s ``predict_unit``: for a CUDA GPU."""
+
+    def __init__(self, module, device: str):
+        self.module = module
+        self.device = device
+
+    def predict_unit(self, rel, mask, extra, batch_size: int = 65536) -> np.ndarray:
+        import torch
+
+        out = np.empty(len(rel), dtype=np.float32)
+        with torch.no_grad():
+            for start in range(0, len(rel), batch_size):
+                part = slice(start, start + batch_size)
+                inputs = (torch.from_numpy(np.ascontiguousarray(a[part])).to(self.device)
+                          for a in (rel, mask, extra))
+                out[part] = self.module(*inputs).float().cpu().numpy()
+        return out
+
+
 def load_selector_torch(path: Union[str, Path, None] = None, device: str = "cpu"):
     import torch
     params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)

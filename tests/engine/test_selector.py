@@ -97,3 +97,14 @@ def test_parent_features_match_a_brute_force_count_and_chunking(monkeypatch):
     for a, b, c in zip((rel, mask, extra), given, chunked):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(a, c)
+
+
+def test_the_torch_selector_for_cuda_answers_as_the_numpy_one():
+    from engine.selector import TorchSelector
+
+    module, numpy_selector = _random_selector(6)
+    points = _cloud(6)
+    rel, mask, extra = parent_features(cKDTree(points), points, points[:400] + 0.004, 0.024)
+    torch_selector = TorchSelector(module.eval(), "cpu")
+    np.testing.assert_allclose(torch_selector.predict_unit(rel, mask, extra, batch_size=150),
+                               numpy_selector.predict_unit(rel, mask, extra), atol=1e-4)

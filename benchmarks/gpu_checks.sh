@@ -1,0 +1,33 @@
+#!/bin/bash
+# Every GPU check of the project in one run, for a session that is lent a GPU machine (about
+# 5 minutes on an H100/H200). From the repository root:
+#
+#     bash benchmarks/gpu_checks.sh
+#
+# The device machine's python3 has torch (CUDA), numpy, scipy and scikit-image but not
+# PyMaxflow; carry its wheel: on this machine, once,
+#     echo /.whl/ >> .git/info/exclude
+#     python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
+#         --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux2014_x86_64 \
+#         -d .whl PyMaxflow
+# and pass carry [".whl"] to the device tool. Logs go to $OUT (the device tool's folder) or
+# out/gpu.
+set -o pipefail
+OUT=${OUT:-out/gpu}
+mkdir -p "$OUT"
+PY=${PYTHON:-python3}
+if [ -d .whl ]; then
+    "$PY" -m pip install -q --no-index --find-links .whl PyMaxflow
+fi
+"$PY" -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available(), torch.cuda.get_device_name(0) if torch.cuda.is_available() else '')" | tee "$OUT/device.log"
+# the CUDA tests (skipped on CPU machines) and the torch/numpy agreement tests
+"$PY" -m pytest -q -rs -p no:cacheprovider tests/engine/test_meshing_torch.py \
+    tests/engine/test_field.py tests/engine/test_selector.py 2>&1 | tee "$OUT/tests.log"
+# the mesher on the GPU (issue #3: seconds per stage and peak memory at 128, 256, 512)
+"$PY" benchmarks/bench_meshing.py --res 128 256 512 --device cuda 2>&1 | tee "$OUT/bench_meshing.log"
+# the whole reconstruction of the 50k owl (issue #4: at most 5 s at 256 on an H100), and the
+# selector's share of the field's time (issue #5)
+for mode in fixed learned; do
+    "$PY" benchmarks/bench_reconstruct.py --resolutions 128 256 --device cuda \
+        --radius-mode "$mode" 2>&1 | tee "$OUT/bench_reconstruct_$mode.log"
+done
