@@ -26,6 +26,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--min-component-faces", type=int, default=0,
                         help="drop output pieces with fewer faces (default 0: keep all)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the min-cut (default 0)")
+    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                        help="where the optimisation runs: auto (a CUDA GPU when PyTorch sees "
+                             "one, else numpy on the CPU), cpu or cuda (default auto)")
 
 
 def load_grid(path: str):
@@ -81,7 +84,8 @@ def run(args) -> int:
 
     grid = load_grid(args.grid)
     settings = MeshingSettings(iso=parse_iso(args.iso, grid.spacing), cut=not args.no_cut,
-                               min_component_faces=args.min_component_faces, seed=args.seed)
+                               min_component_faces=args.min_component_faces, seed=args.seed,
+                               device=args.device)
     if args.iterations is not None:
         settings.iterations = args.iterations
 
@@ -93,7 +97,8 @@ def run(args) -> int:
     write_mesh(args.output, result.mesh)
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items())
     print(f"{len(result.mesh.vertices)} vertices, {len(result.mesh.faces)} faces; iso "
-          f"{result.iso / grid.spacing:.2f} voxels; {stages}", file=sys.stderr)
+          f"{result.iso / grid.spacing:.2f} voxels; {stages} (optimised on "
+          f"{result.stats.get('optimize_device', 'cpu')})", file=sys.stderr)
     for record in result.components:
         print(f"  piece: {record.status.value} {record.faces}/{record.cover_faces} faces "
               f"{record.detail}", file=sys.stderr)

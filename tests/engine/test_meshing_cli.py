@@ -24,12 +24,24 @@ def test_cli_writes_mesh(tmp_path, capsys):
     grid = write_grid(grid_path)
     out = tmp_path / "out.ply"
     assert main(["mesh-udf", str(grid_path), str(out), "--iterations", "120", "--iso", "1.0h",
-                 "--seed", "3"]) == 0
+                 "--seed", "3", "--device", "cpu"]) == 0
     from engine.io import read_mesh
     mesh = read_mesh(str(out))
     d = np.abs(np.linalg.norm(mesh.vertices - [0.1, 0, 0], axis=1) - 0.3) / grid.spacing
     assert len(mesh.faces) > 1000 and d.mean() < 0.05
-    assert "CLOSED_PAIR" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "CLOSED_PAIR" in err and "optimised on cpu" in err
+
+
+def test_cli_refuses_cuda_without_a_gpu(tmp_path, capsys):
+    torch = pytest.importorskip("torch")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    grid_path = tmp_path / "grid.npz"
+    write_grid(grid_path)
+    out = tmp_path / "out.ply"
+    assert main(["mesh-udf", str(grid_path), str(out), "--device", "cuda"]) == 2
+    assert "cuda" in capsys.readouterr().err and not out.exists()
 
 
 @pytest.mark.parametrize("overrides,needle", [
