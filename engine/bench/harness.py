@@ -148,7 +148,8 @@ def _score(pred: Mesh, gt: Mesh, samples: int, seed: int, crop: Optional[Callabl
 def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: str, count: int,
                   seed: int = 0, samples: int = 100_000, progress=None, *, name: str = None,
                   dataset=None, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
-                  pass_ground_truth: bool = False) -> dict:
+                  pass_ground_truth: bool = False, jobs: int = 1,
+                  method_factory: Optional[Callable[[], Callable]] = None) -> dict:
     """Run ``method`` on the first ``count`` test shapes of ``domain`` under ``condition``.
 
     Parameters
@@ -170,6 +171,12 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
     crop_max_dist : distance of the rooms crop (unit frame)
     pass_ground_truth : call ``method(cloud, gt)`` instead; only for :func:`ground_truth`, the
         sampling floor (a perfect reconstruction's scores)
+    jobs : shapes run at once, each in its own process (default 1: in this process). Every
+        shape's input, method and scoring are seeded alone, so the scores do not depend on
+        ``jobs``; the seconds and memory are each process's own. Needs ``method_factory`` and the
+        default dataset; each process limits numpy, BLAS and torch to one thread.
+    method_factory : picklable callable that builds ``method`` (in each worker process), e.g.
+        ``functools.partial(methods.make_method, "ours", resolution=256)``
 
     Returns
     -------
@@ -180,42 +187,26 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
         ``peak_delta_mb``, ``failed``, ``error``, ``empty``, ``pred_faces`` and the metric keys)
         and ``summary`` (see :func:`summarize`).
     """
+    if jobs > 1 and (method_factory is None or dataset is not None):
+        raise ValueError("jobs > 1 needs a method_factory and the default dataset")
     dataset = dataset or _default_dataset()
     name = name or getattr(method, "__name__", "method")
     crop = getattr(dataset, "crop_to_input", None) if domain in CROP_DOMAINS else None
     shape_seeds = list(dataset.test_seeds(domain, count))[:count]
+    tasks = [(int(shape_seed), domain, condition, samples, seed, crop is not None,
+              crop_max_dist, pass_ground_truth) for shape_seed in shape_seeds]
+    label = f"{name} {domain}/{condition}"
     rows: List[dict] = []
     measure = None
-    for index, shape_seed in enumerate(shape_seeds):
-        if progress is not None:
-            progress(index / max(len(shape_seeds), 1), f"{name} {domain}/{condition} "
-                     f"shape {index + 1}/{len(shape_seeds)}")
-        gt = dataset.make_shape(domain, shape_seed)
-        cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
-        visible = None
-        if crop is not None:
-            visible = dataset.make_input(gt, domain, "clean", shape_seed).points
-        row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False,
-               "error": None}
-        pred = None
-        cpu_start = time.process_time()
-        with PeakMemory() as memory:
-            start = time.perf_counter()
-            try:
-                pred = method(cloud, gt) if pass_ground_truth else method(cloud)
-            except Exception as error:  # the benchmark counts every failure, whatever it is
-                row.update(failed=True, error=f"{type(error).__name__}: {error}")
-            seconds = time.perf_counter() - start
-        row.update(seconds=seconds, cpu_seconds=time.process_time() - cpu_start,
-                   peak_rss_mb=memory.peak_mb, peak_delta_mb=memory.delta_mb)
-        measure = memory.measure
-        if pred is None:
-            row.update(_worst_scores(), empty=True, pred_faces=0)
-        else:
-            scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible, cloud.points)
-            row.update({key: scores[key] for key in METRIC_KEYS},
-                       empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
-        rows.append(row)
+    if jobs > 1:
+        for row, measure in _run_parallel(method_factory, tasks, jobs, progress, label):
+            rows.append(row)
+    else:
+        for index, task in enumerate(tasks):
+            if progress is not None:
+                progress(index / max(len(tasks), 1), f"{label} shape {index + 1}/{len(tasks)}")
+            row, measure = _run_shape(method, dataset, *task)
+            rows.append(row)
     if progress is not None:
         progress(1.0, f"{name} {domain}/{condition} done")
 
@@ -231,6 +222,81 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
         "seed": seed, "samples": samples, "protocol": protocol, "memory_measure": measure,
         "environment": environment(), "shapes": rows, "summary": summarize(rows),
     }
+
+
+def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, condition: str,
+               samples: int, seed: int, cropped: bool, crop_max_dist: float,
+               pass_ground_truth: bool):
+    """Build one shape's ground truth and input, run ``method`` on it, score it.
+
+    Returns ``(row, memory_measure)``: the row of :func:`run_benchmark`'s ``shapes``.
+    """
+    gt = dataset.make_shape(domain, shape_seed)
+    cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
+    crop = dataset.crop_to_input if cropped else None
+    visible = dataset.make_input(gt, domain, "clean", shape_seed).points if cropped else None
+    row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False, "error": None}
+    pred = None
+    cpu_start = time.process_time()
+    with PeakMemory() as memory:
+        start = time.perf_counter()
+        try:
+            pred = method(cloud, gt) if pass_ground_truth else method(cloud)
+        except Exception as error:  # the benchmark counts every failure, whatever it is
+            row.update(failed=True, error=f"{type(error).__name__}: {error}")
+        seconds = time.perf_counter() - start
+    row.update(seconds=seconds, cpu_seconds=time.process_time() - cpu_start,
+               peak_rss_mb=memory.peak_mb, peak_delta_mb=memory.delta_mb)
+    if pred is None:
+        row.update(_worst_scores(), empty=True, pred_faces=0)
+    else:
+        scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible, cloud.points)
+        row.update({key: scores[key] for key in METRIC_KEYS},
+                   empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
+    return row, memory.measure
+
+
+# One thread per worker process: a pool of N processes should use N cores, not N x cores.
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_worker_method = None
+
+
+def _start_worker(method_factory) -> None:
+    global _worker_method
+    try:
+        import torch
+    except ImportError:
+        torch = None
+    if torch is not None:
+        torch.set_num_threads(1)
+    _worker_method = method_factory()
+
+
+def _worker_shape(task):
+    return _run_shape(_worker_method, _default_dataset(), *task)
+
+
+def _run_parallel(method_factory, tasks, jobs: int, progress, label: str):
+    """The rows of ``tasks`` (in task order), run in ``jobs`` spawned worker processes."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    saved = {key: os.environ.get(key) for key in _THREAD_VARIABLES}
+    os.environ.update({key: "1" for key in _THREAD_VARIABLES})  # inherited by the workers
+    try:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_start_worker,
+                                 initargs=(method_factory,)) as pool:
+            for done, result in enumerate(pool.map(_worker_shape, tasks)):
+                if progress is not None:
+                    progress((done + 1) / len(tasks), f"{label} shape {done + 1}/{len(tasks)}")
+                yield result
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 def first_shapes(result: dict, count: int) -> Optional[dict]:

@@ -32,6 +32,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("all",))
     parser.add_argument("--condition", default="all", choices=CONDITION_NAMES + ("all",))
     parser.add_argument("--count", type=int, default=20, help="test shapes per domain (default 20)")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="shapes run at once, one process each with one thread (default 1; "
+                             "on a many-core GPU machine, e.g. 12)")
     parser.add_argument("--samples", type=int, default=100_000,
                         help="metric samples per mesh (default 100000)")
     parser.add_argument("--seed", type=int, default=0, help="metric sampling seed (default 0)")
@@ -62,15 +65,18 @@ def _progress(quiet: bool):
     return report
 
 
-def _build(args, name: str, radius_mode: str):
+def _factory(args, name: str, radius_mode: str):
+    """A picklable callable that builds the method (in this process or in a worker)."""
+    import functools
+
     from ..bench.methods import make_method
 
+    options = {}
     if name in ("ours", "nearest-udf"):
         options = {"resolution": args.resolution, "device": args.device}
         if name == "ours":
             options["radius_mode"] = radius_mode
-        return make_method(name, **options)
-    return make_method(name)
+    return functools.partial(make_method, name, **options)
 
 
 def run(args) -> int:
@@ -81,6 +87,8 @@ def run(args) -> int:
 
     if args.count < 1:
         raise InputError("--count must be at least 1")
+    if args.jobs < 1:
+        raise InputError("--jobs must be at least 1")
     if args.method not in METHODS and args.method != "ground-truth":
         raise InputError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
     domains = _selected(args.domain, DOMAIN_NAMES)
@@ -94,7 +102,8 @@ def run(args) -> int:
 
     oracle = args.method == "ground-truth"
     try:
-        method = ground_truth if oracle else _build(args, args.method, args.radius_mode)
+        factory = None if oracle else _factory(args, args.method, args.radius_mode)
+        method = ground_truth if oracle else factory()
     except MethodUnavailable as error:
         print(f"{args.method}: not available: {error}", file=sys.stderr)
         return 1
@@ -104,7 +113,8 @@ def run(args) -> int:
             result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
                                    samples=args.samples, progress=progress,
                                    name="ground-truth" if oracle else None,
-                                   pass_ground_truth=oracle)
+                                   pass_ground_truth=oracle, jobs=1 if oracle else args.jobs,
+                                   method_factory=factory)
             path = write_json(result, args.out)
             print(f"wrote {path}", file=sys.stderr)
             results.append(result)
@@ -168,15 +178,17 @@ def _run_table(args, domains, conditions, progress) -> int:
                 cells[mode] = (f"not run ({', '.join(missing)}: no result with {args.count} "
                                f"shapes in {args.out})" if missing else found)
                 continue
+            factory = _factory(args, "ours", mode)
             try:
-                method = _build(args, "ours", mode)
+                method = factory()
             except MethodUnavailable as error:
                 cells[mode] = f"not available ({error})"
                 continue
             cells[mode] = {}
             for domain in domains:
                 result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
-                                       samples=args.samples, progress=progress)
+                                       samples=args.samples, progress=progress, jobs=args.jobs,
+                                       method_factory=factory)
                 print(f"wrote {write_json(result, args.out)}", file=sys.stderr)
                 cells[mode][domain] = result
         print(format_table_one(cells, domains, condition, args.count, args.samples))

@@ -323,3 +323,22 @@ def test_poisson_is_deterministic_and_closes_a_sphere():
     assert np.array_equal(first.faces, second.faces)
     scores = evaluate(first, gt, samples=SAMPLES, seed=0)
     assert scores["cd_l1_x100"] < 2.0 and scores["nc"] > 0.9
+
+
+def test_parallel_shapes_score_as_the_serial_run():
+    import functools
+
+    from engine.bench import methods
+
+    factory = functools.partial(methods.make_method, "nearest-udf", resolution=48, device="cpu")
+    serial = run_benchmark(factory(), "garments", "clean", 2, samples=SAMPLES)
+    parallel = run_benchmark(None, "garments", "clean", 2, samples=SAMPLES, jobs=2,
+                             method_factory=factory, name="nearest-udf")
+    assert [row["shape_seed"] for row in parallel["shapes"]] == \
+        [row["shape_seed"] for row in serial["shapes"]]
+    for a, b in zip(serial["shapes"], parallel["shapes"]):
+        assert not a["failed"] and not b["failed"]
+        for key in METRIC_KEYS:
+            assert b[key] == pytest.approx(a[key], rel=1e-6), key
+    with pytest.raises(ValueError, match="method_factory"):
+        run_benchmark(factory(), "garments", "clean", 1, jobs=2)
