@@ -148,3 +148,39 @@ def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
     whole = network.predict(rel, mask)
     trimmed = predict_trimmed(network.predict, rel, mask, counts, group_size=256)
     np.testing.assert_allclose(trimmed, whole, rtol=1e-5, atol=1e-6)
+
+
+def plane_height_predictor(rel, mask):
+    """A stand-in backbone that is exact for points on one plane z = const: the patch
+    centroid's height, |mean z| (in units of r, as the backbone answers)."""
+    count = np.maximum(mask.sum(axis=1), 1)
+    return np.abs((rel[:, :, 2] * mask).sum(axis=1) / count)
+
+
+def test_balls_with_too_few_points_are_widened_not_left_to_the_nearest_point():
+    # a plane sampled every 0.03: a ball of r = 0.018 between four samples holds none of them;
+    # the nearest-point fallback would dent the field there (and wrap samples in bubbles)
+    step = 0.03
+    xy = np.stack(np.meshgrid(np.arange(-0.3, 0.3001, step), np.arange(-0.3, 0.3001, step),
+                              indexing="ij"), axis=-1).reshape(-1, 2)
+    points = np.column_stack([xy, np.zeros(len(xy))])
+    settings = ReconstructSettings(resolution=128, radius=0.018)
+    band = compute_udf_band(points, settings, predictor=plane_height_predictor)
+    assert band.stats["widened_balls"] > 0 and band.stats["sparse_balls"] == 0
+    flat, values = band_of(band.grid)
+    nodes = node_positions(band.grid)[flat]
+    inner = np.all(np.abs(nodes[:, :2]) < 0.25, axis=1)
+    near = cKDTree(points).query(nodes)[0] <= 3 * band.stats["spacing"]  # the network's nodes
+    chosen = inner & near
+    np.testing.assert_allclose(values[chosen], np.abs(nodes[chosen, 2]), atol=1e-6)
+
+
+def test_an_isolated_point_keeps_the_nearest_point_distance():
+    points = np.concatenate([sphere_points(), [[0.0, 0.0, 0.0]]])  # the centre: far from all
+    band = compute_udf_band(points, ReconstructSettings(resolution=64, radius=0.03),
+                            predictor=plane_height_predictor)
+    assert band.stats["sparse_balls"] > 0
+    flat, values = band_of(band.grid)
+    nodes = node_positions(band.grid)[flat]
+    centre = np.linalg.norm(nodes, axis=1) < 0.02
+    np.testing.assert_allclose(values[centre], np.linalg.norm(nodes[centre], axis=1), rtol=1e-5)
