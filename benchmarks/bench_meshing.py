@@ -23,6 +23,7 @@ import tracemalloc
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from engine.devices import resolve_device  # noqa: E402
 from engine.meshing import MeshingSettings, extract_surface  # noqa: E402
 from engine.meshing import analytic as A  # noqa: E402
 
@@ -34,7 +35,7 @@ def main():
     parser.add_argument("--iterations", type=int, default=None)
     parser.add_argument("--device", default="cpu", choices=("cpu", "cuda", "auto"))
     args = parser.parse_args()
-    gpu = args.device != "cpu" and _cuda_available()
+    gpu = resolve_device(args.device) == "cuda"
     shapes = {"sphere": A.sphere((0, 0, 0), 0.5), "disk": A.disk((0, 0, 0), 0.5)}
     header = (f"{'shape':7s} {'res':>4s} {'cover F':>9s} {'out F':>8s} {'grid s':>7s} "
               f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'cut s':>6s} {'clean s':>7s} "
@@ -70,14 +71,6 @@ def main():
                   f"{1e3 * t['optimize'] / max(iters, 1):6.0f} {peak / 2**20:10.0f} "
                   f"{rss:7.0f} {gpu_mb:7.0f} {status}", flush=True)
             del grid, result
-
-
-def _cuda_available() -> bool:
-    try:
-        import torch
-    except ImportError:
-        return False
-    return torch.cuda.is_available()
 
 
 if __name__ == "__main__":

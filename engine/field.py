@@ -14,10 +14,10 @@ policy's choice). A ball that holds fewer than ``MIN_PATCH_POINTS`` points is wi
 surface runs, and on a sparse scan their nearest-point distance would dent the field between
 the samples. A ball still short at the widest (an isolated outlier) gets its node's
 nearest-point distance (LoSF-UDF skips balls with fewer than 6 points), an upper bound of the
-UDF when the points lie on the surface. Band nodes farther than
-``NETWORK_BAND_NODES`` spacings from every input point also keep their nearest-point distance:
-the mesher's iso-level is at most 2 spacings and its vertices end on the zero level, so only the
-nodes near the surface need the network's accuracy (at resolution 256 this skips about a third
+UDF when the points lie on the surface. Band nodes farther than ``NETWORK_BAND_NODES``
+spacings from every input point also keep their nearest-point distance: the mesher's iso-level
+is at most 2 spacings and its vertices end on the zero level, so only the nodes near the
+surface need the network's accuracy (at resolution 256 this skips about a third
 of the band). Every other node is farther than R from all input points and holds R: the field is
 the UDF truncated at R, which is all the mesher needs.
 
@@ -311,9 +311,9 @@ def widen_sparse_balls(tree, points: np.ndarray, queries: np.ndarray, radii: np.
     (the first sparse test room: CD-L1 x100 0.999 without widening, 0.628 with it). A wider
     ball holds the neighbours that show where the surface runs; the backbone reads any radius
     (its input is scaled by r, its output multiplied by r) and was trained on patches of a
-    handful of points upwards. Each ball takes the first factor that
-    gives it ``MIN_PATCH_POINTS`` points; a ball still short at the last factor (an isolated
-    outlier) keeps its patch and the fallback.
+    handful of points upwards. Each ball takes the first factor that gives it
+    ``MIN_PATCH_POINTS`` points; a ball still short at the last factor (an isolated outlier)
+    keeps the fallback.
 
     Returns
     -------

@@ -22,7 +22,8 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from .patches import QUERY_CHUNK, Neighbours, groups_by_count, nearest_within, patches_from_neighbours
+from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
+                      patches_from_neighbours)
 from .weights_file import read_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
@@ -65,8 +66,8 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     distance = neighbours.distance[:, :PARENT_POINTS]
     rows, columns = np.nonzero(distance <= parent_radius)
     counts = np.bincount(rows, minlength=len(distance))
-    shell = np.minimum((distance[rows, columns] / parent_radius * HISTOGRAM_BINS).astype(np.int64),
-                       HISTOGRAM_BINS - 1)
+    shell = (distance[rows, columns] / parent_radius * HISTOGRAM_BINS).astype(np.int64)
+    shell = np.minimum(shell, HISTOGRAM_BINS - 1)
     hist = np.bincount(rows * HISTOGRAM_BINS + shell, minlength=len(distance) * HISTOGRAM_BINS)
     hist = hist.reshape(-1, HISTOGRAM_BINS) / np.maximum(counts, 1)[:, None]
     log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)

@@ -256,19 +256,14 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
     return row, memory.measure
 
 
-# One thread per worker process: a pool of N processes should use N cores, not N x cores.
+# One thread per worker process (numpy's BLAS and torch both read these at start): a pool of
+# N processes should use N cores, not N x cores.
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _worker_method = None
 
 
 def _start_worker(method_factory) -> None:
     global _worker_method
-    try:
-        import torch
-    except ImportError:
-        torch = None
-    if torch is not None:
-        torch.set_num_threads(1)
     _worker_method = method_factory()
 
 

@@ -92,7 +92,7 @@ class StallCheck:
 
     def stalled(self, summary: np.ndarray) -> bool:
         """``summary``: mean and max vertex, mean and max centroid distance (see
-        :func:`_distance_summary`), taken at an iteration where :meth:`due` holds."""
+        :func:`distance_summary`), taken at an iteration where :meth:`due` holds."""
         previous, self.reference = self.reference, summary
         if previous is None:
             return False
@@ -100,7 +100,13 @@ class StallCheck:
         return gain[0::2].max() < STALL_MEAN and gain[1::2].max() < STALL_MAX
 
 
-def _distance_summary(dv: np.ndarray, dc: np.ndarray) -> np.ndarray:
+def final_stats(ran: int, dv: np.ndarray, dc: np.ndarray) -> OptimizeStats:
+    """The stats of a finished optimisation from its last vertex / centroid distances."""
+    summary = distance_summary(dv, dc)
+    return OptimizeStats(ran, float(summary[0]), float(summary[1]), float(summary[2]))
+
+
+def distance_summary(dv: np.ndarray, dc: np.ndarray) -> np.ndarray:
     """Mean and max of the finite vertex and centroid distances (voxels)."""
     out = np.zeros(4)
     for k, d in enumerate((dv, dc)):
@@ -177,7 +183,7 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
             cents = cen @ g
             dv, vv = query(g)
             dc, vc = query(cents)
-            if stall.due(it) and stall.stalled(_distance_summary(dv, dc)):
+            if stall.due(it) and stall.stalled(distance_summary(dv, dc)):
                 break
             grad = _unit_inplace(vv, dv)
             face_grad = _unit_inplace(vc, dc)
@@ -220,8 +226,4 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
         dc, _ = query(cen @ g)
     finally:
         query.close()
-    finite = np.isfinite(dv)
-    stats = OptimizeStats(ran, float(dv[finite].mean()) if finite.any() else 0.0,
-                          float(dv[finite].max()) if finite.any() else 0.0,
-                          float(dc[np.isfinite(dc)].mean()) if np.isfinite(dc).any() else 0.0)
-    return field.index_to_world(g), stats
+    return field.index_to_world(g), final_stats(ran, dv, dc)

@@ -14,7 +14,7 @@ import numpy as np
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
 from .grid_field import BRICK, UDFGrid
-from .optimize import OptimizeStats, StallCheck, learning_rate
+from .optimize import StallCheck, distance_summary, final_stats, learning_rate
 
 _CELLS = BRICK ** 3
 
@@ -88,16 +88,6 @@ def _face_normals(g, faces):
     return cross / norm.clamp_min(1e-300)[:, None], 0.5 * norm
 
 
-def _distance_summary(dv, dc) -> np.ndarray:
-    """Mean and max of the finite vertex and centroid distances (voxels), as numpy."""
-    out = np.zeros(4)
-    for k, d in enumerate((dv, dc)):
-        finite = d[d.isfinite()]
-        if finite.numel():
-            out[2 * k], out[2 * k + 1] = float(finite.mean()), float(finite.max())
-    return out
-
-
 def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid,
                          iterations: int = 400, laplacian_weight: float = 16.0,
                          lr: float = 0.05, normal_start: float = 0.75,
@@ -141,7 +131,8 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
         cents = cen @ g
         dv, vv = query.closest_index(g)
         dc, vc = query.closest_index(cents)
-        if stall.due(it) and stall.stalled(_distance_summary(dv, dc)):
+        if stall.due(it) and stall.stalled(distance_summary(dv.cpu().numpy(),
+                                                                dc.cpu().numpy())):
             break
         grad = _unit(vv, dv)
         face_grad = _unit(vc, dc)
@@ -168,9 +159,5 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
         g -= step * (mom / denom[:, None])
     dv, _ = query.closest_index(g)
     dc, _ = query.closest_index(cen @ g)
-    dv, dc = dv.cpu().numpy(), dc.cpu().numpy()
-    finite = np.isfinite(dv)
-    stats = OptimizeStats(ran, float(dv[finite].mean()) if finite.any() else 0.0,
-                          float(dv[finite].max()) if finite.any() else 0.0,
-                          float(dc[np.isfinite(dc)].mean()) if np.isfinite(dc).any() else 0.0)
-    return field.index_to_world(g.cpu().numpy()), stats
+    return (field.index_to_world(g.cpu().numpy()),
+            final_stats(ran, dv.cpu().numpy(), dc.cpu().numpy()))
