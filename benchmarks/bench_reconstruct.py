@@ -25,7 +25,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_INPUT = ROOT / "examples" / "owl_50k.ply"
-STAGES = ("frame", "band", "udf", "meshing", "finish", "total", "cpu_s")
+STAGES = ("outliers", "frame", "band", "udf", "meshing", "finish", "total", "cpu_s")
 
 
 def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mode: str) -> dict:

@@ -3,8 +3,8 @@
 The CLI, the Blender operator, the batch script and the benchmark all call :func:`reconstruct`;
 none of them re-implements a stage. The stages (DESIGN.md, "Data flow"):
 
-1. validate the settings; put the points in the unit frame (refusing clouds no surface can be
-   built from);
+1. validate the settings; refuse clouds no surface can be built from; drop isolated points
+   (:mod:`.outliers`); put the points in the unit frame;
 2. evaluate the UDF on the grid band near the points (:mod:`.field`);
 3. extract a single-layer mesh with DCUDF (:mod:`.meshing`);
 4. map the mesh back to the input's coordinates (the same similarity transform, inverted) and
@@ -19,8 +19,9 @@ import numpy as np
 
 from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
-from .frame import UnitFrame
+from .frame import UnitFrame, validate_points
 from .geometry import Mesh, PointCloud
+from .outliers import find_outliers
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .settings import ReconstructSettings
 
@@ -40,13 +41,13 @@ class ReconstructResult:
     messages : list of str
         Notes for the user (warnings from the mesher, too sparse a cloud, ...).
     timings : dict of str to float
-        Seconds per stage: ``frame``, ``band``, ``udf``, ``meshing``, ``finish``, ``total``, and
+        Seconds per stage: ``outliers``, ``frame``, ``band``, ``udf``, ``meshing``, ``finish``, ``total``, and
         the mesher's own stages as ``meshing_<stage>``.
     stats : dict
-        ``points``, ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``, ``queries``
-        (backbone evaluations), ``sparse_balls``, ``mean_patch_points``, ``udf_source``,
-        ``device``, ``iso`` (unit frame), ``components`` (pieces of the output), ``vertices``,
-        ``faces``, ``meshing`` (the mesher's own numbers).
+        ``points`` (used, after outliers), ``outliers`` (dropped), ``grid_shape``, ``spacing``,
+        ``band_radius``, ``band_nodes``, ``queries`` (backbone evaluations), ``sparse_balls``,
+        ``mean_patch_points``, ``udf_source``, ``device``, ``iso`` (unit frame), ``components``
+        (pieces of the output), ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
     """
 
     mesh: Mesh
@@ -103,13 +104,18 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings: Dict[str, float] = {}
 
     progress(0.0, "preparing the points")
+    points = validate_points(points)
+    if colors is not None and len(colors) != len(points):
+        raise InputError(f"the cloud has {len(colors)} colours for {len(points)} points; "
+                         f"give one colour per point or none")
+    progress(0.0, "finding outliers")
+    mark = time.perf_counter()
+    points, colors, outlier_count = _drop_outliers(points, colors, settings.outlier_ratio)
+    timings["outliers"] = time.perf_counter() - mark
     frame = UnitFrame.from_points(points)
     points_unit = frame.to_unit(points)
-    if colors is not None and len(colors) != len(points_unit):
-        raise InputError(f"the cloud has {len(colors)} colours for {len(points_unit)} points; "
-                         f"give one colour per point or none")
     tree = cKDTree(points_unit)
-    timings["frame"] = time.perf_counter() - started
+    timings["frame"] = time.perf_counter() - started - timings["outliers"]
     check_cancel(cancel)
 
     band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
@@ -140,7 +146,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings["finish"] = time.perf_counter() - mark
     timings["total"] = time.perf_counter() - started
 
-    stats = {"points": int(len(points_unit)), **band.stats,
+    stats = {"points": int(len(points_unit)), "outliers": outlier_count, **band.stats,
              "queries": (band.stats["network_queries"] - band.stats["sparse_balls"]
                          if udf_source == "network" else 0),
              "iso": float(meshed.iso), "components": _piece_count(result_mesh),
@@ -148,6 +154,10 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
              "meshing": dict(meshed.stats)}
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
+    if outlier_count:
+        share = 100.0 * outlier_count / (outlier_count + len(points_unit))
+        messages.insert(0, f"dropped {outlier_count:,} isolated points ({share:.1f} %) as "
+                           f"outliers; set the outlier ratio to 0 to keep every point")
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
@@ -155,6 +165,24 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
         messages.append("the mesh is empty: try a larger radius or a lower resolution")
     progress(1.0, f"done: {stats['vertices']:,} vertices, {stats['faces']:,} faces")
     return ReconstructResult(result_mesh, messages, timings, stats)
+
+
+def _drop_outliers(points: np.ndarray, colors, ratio: float):
+    """The points (and colours) without the outliers :func:`.outliers.find_outliers` finds.
+
+    Returns ``(points, colors, dropped)``. Refuses, saying why, when too few points are left.
+    """
+    outlier = find_outliers(points, ratio)
+    dropped = int(outlier.sum())
+    if not dropped:
+        return points, colors, 0
+    kept = points[~outlier]
+    try:
+        validate_points(kept)
+    except InputError as error:
+        raise InputError(f"{error} (after dropping {dropped:,} of {len(points):,} points as "
+                         f"outliers; set the outlier ratio to 0 to keep every point)") from None
+    return kept, None if colors is None else np.asarray(colors)[~outlier], dropped
 
 
 def meshing_settings(settings: ReconstructSettings):

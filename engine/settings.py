@@ -3,6 +3,7 @@
 from dataclasses import asdict, dataclass, fields
 
 from .errors import InputError
+from .outliers import DEFAULT_RATIO as DEFAULT_OUTLIER_RATIO
 
 RADIUS_MODES = ("fixed", "curvature", "learned")
 DEVICES = ("auto", "cpu", "cuda")
@@ -22,6 +23,9 @@ class ReconstructSettings:
     device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
     seed: every random choice is drawn from this seed, so results repeat on CPU.
     min_component_faces: drop output pieces with fewer faces (0 keeps everything).
+    outlier_ratio: points isolated from the surface are dropped first: a point whose spacing to
+        its nearest neighbours is more than this many times that of the points around it
+        (:mod:`.outliers`); 0 keeps every point.
     """
 
     radius_mode: str = "fixed"
@@ -33,6 +37,7 @@ class ReconstructSettings:
     device: str = "auto"
     seed: int = 0
     min_component_faces: int = 0
+    outlier_ratio: float = DEFAULT_OUTLIER_RATIO
 
     def validate(self) -> "ReconstructSettings":
         """Raise :class:`InputError` with a clear message when a setting is out of range."""
@@ -52,6 +57,9 @@ class ReconstructSettings:
             raise InputError(f"resolution {self.resolution} is outside [32, 1024]")
         if self.min_component_faces < 0:
             raise InputError("min_component_faces must be >= 0")
+        if self.outlier_ratio != 0 and not 1.5 <= self.outlier_ratio <= 20:
+            raise InputError(f"outlier ratio {self.outlier_ratio} is outside [1.5, 20] "
+                             f"(0 keeps every point)")
         return self
 
     def to_dict(self) -> dict:

@@ -107,6 +107,13 @@ class UDFR_SceneSettings(bpy.types.PropertyGroup):
                     "(0 keeps every piece)",
         default=_DEFAULTS.min_component_faces, min=0, soft_max=10000,
     )
+    outlier_ratio: FloatProperty(
+        name="Outlier Ratio",
+        description="Drop stray points first: a point whose gap to its neighbours is more than "
+                    "this many times that of the points around it (1.5 to 20; lower drops more, "
+                    "0 keeps every point)",
+        default=_DEFAULTS.outlier_ratio, min=0.0, max=20.0, step=10, precision=1,
+    )
 
 
 def to_settings(props: UDFR_SceneSettings) -> ReconstructSettings:
@@ -122,6 +129,7 @@ def to_settings(props: UDFR_SceneSettings) -> ReconstructSettings:
         device=props.device,
         seed=props.seed,
         min_component_faces=props.min_component_faces,
+        outlier_ratio=round(props.outlier_ratio, 6),
     ).validate()
 
 

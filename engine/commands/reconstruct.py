@@ -41,6 +41,10 @@ def add_arguments(parser) -> None:
                         help=f"seed of every random choice (default {defaults.seed})")
     parser.add_argument("--min-component-faces", type=int, default=defaults.min_component_faces,
                         help="drop output pieces with fewer faces (default 0: keep all)")
+    parser.add_argument("--outlier-ratio", type=float, default=defaults.outlier_ratio,
+                        help=f"drop points whose gap to their neighbours is more than this many "
+                             f"times that of the points around them (default "
+                             f"{defaults.outlier_ratio}; 0 keeps every point)")
     parser.add_argument("--udf-source", choices=("network", "nearest"), default="network",
                         help="the learned backbone, or the distance to the nearest input point "
                              "(a non-learned baseline); default network")
@@ -90,6 +94,7 @@ def run(args) -> int:
         radius_mode=args.radius_mode, radius=args.radius, parent_radius=args.parent_radius,
         rho_min=args.rho_min, rho_max=args.rho_max, resolution=args.resolution,
         device=args.device, seed=args.seed, min_component_faces=args.min_component_faces,
+        outlier_ratio=args.outlier_ratio,
     ).validate()
     progress = _StderrProgress(args.quiet)
     stop = threading.Event()

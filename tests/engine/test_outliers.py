@@ -1,0 +1,71 @@
+"""Outliers: stray points are found, surface points are kept (even where the scan is sparse)."""
+
+import numpy as np
+import pytest
+
+from engine.errors import InputError
+from engine.outliers import find_outliers
+from engine.reconstruct import reconstruct
+from engine.settings import ReconstructSettings
+
+
+def plane_with_strays(surface=6000, strays=300, seed=0):
+    """Points on the unit square z = 0, plus strays scattered 0.05-0.3 above or below it.
+
+    Returns (points, is_stray).
+    """
+    rng = np.random.default_rng(seed)
+    plane = np.column_stack([rng.random((surface, 2)), np.zeros(surface)])
+    height = rng.uniform(0.05, 0.3, strays) * rng.choice([-1.0, 1.0], strays)
+    off = np.column_stack([rng.random((strays, 2)), height])
+    return np.vstack([plane, off]), np.r_[np.zeros(surface, bool), np.ones(strays, bool)]
+
+
+def test_strays_off_a_plane_are_found_and_the_plane_is_kept():
+    points, stray = plane_with_strays()
+    found = find_outliers(points)
+    assert found[stray].mean() >= 0.9, found[stray].mean()
+    assert found[~stray].sum() <= 3  # a handful of chance gaps at most
+
+
+def test_a_scan_whose_density_falls_sixteenfold_keeps_its_sparse_end():
+    # density falls as 1 / (1 + 15 x) across the square, like a wall seen from one side
+    rng = np.random.default_rng(1)
+    u = rng.random(40000)
+    x = ((1 + 15) ** u - 1) / 15  # inverse CDF of a density proportional to 1 / (1 + 15 x)
+    points = np.column_stack([x, rng.random(len(x)), np.zeros(len(x))])
+    found = find_outliers(points)
+    assert found.sum() <= 0.001 * len(points), found.sum()
+
+
+def test_the_answer_ignores_units_and_duplicates():
+    points, _ = plane_with_strays(seed=2)
+    found = find_outliers(points)
+    assert np.array_equal(find_outliers(points * 1000.0 + 7.0), found)
+    doubled = np.vstack([points] * 10)  # ten copies of every point: neighbours at distance 0
+    assert np.array_equal(find_outliers(doubled), np.tile(found, 10))
+
+
+def test_ratio_zero_keeps_every_point():
+    points, _ = plane_with_strays()
+    assert not find_outliers(points, ratio=0).any()
+
+
+def test_reconstruct_drops_the_strays_and_says_so():
+    points, stray = plane_with_strays(surface=8000, strays=200, seed=3)
+    settings = ReconstructSettings(resolution=32, device="cpu")
+    result = reconstruct(points, settings, udf_source="nearest")
+    assert result.stats["outliers"] >= 180
+    assert result.stats["points"] == len(points) - result.stats["outliers"]
+    assert "outliers" in result.messages[0]
+    # without the strays, the mesh is the square: every vertex within a voxel of z = 0
+    assert np.abs(result.mesh.vertices[:, 2]).max() < 1.0 / 32
+    kept = reconstruct(points, ReconstructSettings(resolution=32, device="cpu", outlier_ratio=0),
+                       udf_source="nearest")
+    assert kept.stats["outliers"] == 0
+    assert np.abs(kept.mesh.vertices[:, 2]).max() > 0.05  # the strays grew pieces of their own
+
+
+def test_an_outlier_ratio_out_of_range_is_refused():
+    with pytest.raises(InputError, match="outlier ratio"):
+        ReconstructSettings(outlier_ratio=1.0).validate()
