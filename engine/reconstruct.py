@@ -4,7 +4,7 @@ The CLI, the Blender operator, the batch script and the benchmark all call :func
 none of them re-implements a stage. The stages (DESIGN.md, "Data flow"):
 
 1. validate the settings; refuse clouds no surface can be built from; drop isolated points
-   (:mod:`.outliers`); put the points in the unit frame;
+   when there are many (:mod:`.outliers`); put the points in the unit frame;
 2. evaluate the UDF on the grid band near the points (:mod:`.field`);
 3. extract a single-layer mesh with DCUDF (:mod:`.meshing`);
 4. map the mesh back to the input's coordinates (the same similarity transform, inverted) and
@@ -21,7 +21,7 @@ from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
 from .frame import UnitFrame, validate_points
 from .geometry import Mesh, PointCloud
-from .outliers import find_outliers
+from .outliers import AUTO_SHARE, find_outliers
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .settings import ReconstructSettings
 
@@ -110,7 +110,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
                          f"give one colour per point or none")
     progress(0.0, "finding outliers")
     mark = time.perf_counter()
-    points, colors, outlier_count = _drop_outliers(points, colors, settings.outlier_ratio)
+    points, colors, outlier_count, outlier_note = _drop_outliers(points, colors, settings)
     timings["outliers"] = time.perf_counter() - mark
     frame = UnitFrame.from_points(points)
     points_unit = frame.to_unit(points)
@@ -154,10 +154,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
              "meshing": dict(meshed.stats)}
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
-    if outlier_count:
-        share = 100.0 * outlier_count / (outlier_count + len(points_unit))
-        messages.insert(0, f"dropped {outlier_count:,} isolated points ({share:.1f} %) as "
-                           f"outliers; set the outlier ratio to 0 to keep every point")
+    if outlier_note:
+        messages.insert(0, outlier_note)
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
@@ -167,22 +165,32 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     return ReconstructResult(result_mesh, messages, timings, stats)
 
 
-def _drop_outliers(points: np.ndarray, colors, ratio: float):
-    """The points (and colours) without the outliers :func:`.outliers.find_outliers` finds.
+def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings):
+    """The points (and colours) without the outliers, as ``settings.outliers`` says.
 
-    Returns ``(points, colors, dropped)``. Refuses, saying why, when too few points are left.
+    Returns ``(points, colors, dropped, note)``; ``note`` tells the user what was found and
+    done (None when nothing was found). Refuses, saying why, when too few points are left.
     """
-    outlier = find_outliers(points, ratio)
-    dropped = int(outlier.sum())
-    if not dropped:
-        return points, colors, 0
+    if settings.outliers == "keep":
+        return points, colors, 0, None
+    outlier = find_outliers(points, settings.outlier_ratio)
+    found = int(outlier.sum())
+    share = 100.0 * found / len(points)
+    if not found:
+        return points, colors, 0, None
+    if settings.outliers == "auto" and found < AUTO_SHARE * len(points):
+        return points, colors, 0, (
+            f"{found:,} points ({share:.1f} %) look isolated but were kept: so few are more "
+            f"often the sparse edge of a scan than strays (outliers 'drop' drops them)")
     kept = points[~outlier]
     try:
         validate_points(kept)
     except InputError as error:
-        raise InputError(f"{error} (after dropping {dropped:,} of {len(points):,} points as "
-                         f"outliers; set the outlier ratio to 0 to keep every point)") from None
-    return kept, None if colors is None else np.asarray(colors)[~outlier], dropped
+        raise InputError(f"{error} (after dropping {found:,} of {len(points):,} points as "
+                         f"outliers; set outliers to 'keep' to use every point)") from None
+    colors = None if colors is None else np.asarray(colors)[~outlier]
+    return kept, colors, found, (f"dropped {found:,} isolated points ({share:.1f} %) as "
+                                 f"outliers (outliers 'keep' uses every point)")
 
 
 def meshing_settings(settings: ReconstructSettings):

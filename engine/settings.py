@@ -4,6 +4,7 @@ from dataclasses import asdict, dataclass, fields
 
 from .errors import InputError
 from .outliers import DEFAULT_RATIO as DEFAULT_OUTLIER_RATIO
+from .outliers import POLICIES as OUTLIER_POLICIES
 
 RADIUS_MODES = ("fixed", "curvature", "learned")
 DEVICES = ("auto", "cpu", "cuda")
@@ -23,9 +24,12 @@ class ReconstructSettings:
     device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
     seed: every random choice is drawn from this seed, so results repeat on CPU.
     min_component_faces: drop output pieces with fewer faces (0 keeps everything).
-    outlier_ratio: points isolated from the surface are dropped first: a point whose spacing to
-        its nearest neighbours is more than this many times that of the points around it
-        (:mod:`.outliers`); 0 keeps every point.
+    outliers: what to do with points isolated from the surface (:mod:`.outliers`): ``drop``
+        them before reconstructing, ``keep`` them, or ``auto``: drop them when they are at
+        least 1 % of the cloud (a scan with strays), else keep them (on a clean scan the few
+        points flagged are more often the sparse edge of the scan).
+    outlier_ratio: a point is isolated when its spacing to its nearest neighbours is more than
+        this many times that of the points around it.
     """
 
     radius_mode: str = "fixed"
@@ -37,6 +41,7 @@ class ReconstructSettings:
     device: str = "auto"
     seed: int = 0
     min_component_faces: int = 0
+    outliers: str = "auto"
     outlier_ratio: float = DEFAULT_OUTLIER_RATIO
 
     def validate(self) -> "ReconstructSettings":
@@ -57,9 +62,11 @@ class ReconstructSettings:
             raise InputError(f"resolution {self.resolution} is outside [32, 1024]")
         if self.min_component_faces < 0:
             raise InputError("min_component_faces must be >= 0")
-        if self.outlier_ratio != 0 and not 1.5 <= self.outlier_ratio <= 20:
-            raise InputError(f"outlier ratio {self.outlier_ratio} is outside [1.5, 20] "
-                             f"(0 keeps every point)")
+        if self.outliers not in OUTLIER_POLICIES:
+            raise InputError(f"outliers must be one of {', '.join(OUTLIER_POLICIES)}, "
+                             f"not {self.outliers!r}")
+        if not 1.5 <= self.outlier_ratio <= 20:
+            raise InputError(f"outlier ratio {self.outlier_ratio} is outside [1.5, 20]")
         return self
 
     def to_dict(self) -> dict:

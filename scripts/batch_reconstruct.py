@@ -63,7 +63,7 @@ def script_arguments() -> list:
     return [] if bpy.app.binary_path else sys.argv[1:]  # the bpy module has no binary
 
 
-def build_parser(settings_type, radius_modes, devices, read_formats, write_formats):
+def build_parser(settings_type, choices, read_formats, write_formats):
     parser = argparse.ArgumentParser(
         prog="batch_reconstruct.py",
         description="Reconstruct meshes from point-cloud files with UDF Reconstruction.")
@@ -81,7 +81,6 @@ def build_parser(settings_type, radius_modes, devices, read_formats, write_forma
     group = parser.add_argument_group(
         "reconstruction settings (default: the open file's panel values, else the panel's "
         "defaults; lengths are fractions of each cloud's longest side)")
-    choices = {"radius_mode": radius_modes, "device": devices}
     for field in fields(settings_type):
         group.add_argument("--" + field.name.replace("_", "-"), dest=field.name, default=None,
                            type=type(field.default), choices=choices.get(field.name),
@@ -159,8 +158,9 @@ def main() -> int:
     properties = importlib.import_module(package + ".ui.properties")
     bridge = importlib.import_module(package + ".operators.bridge")
 
-    parser = build_parser(settings_module.ReconstructSettings, settings_module.RADIUS_MODES,
-                          settings_module.DEVICES, engine_io.READ_FORMATS,
+    choices = {"radius_mode": settings_module.RADIUS_MODES, "device": settings_module.DEVICES,
+               "outliers": settings_module.OUTLIER_POLICIES}
+    parser = build_parser(settings_module.ReconstructSettings, choices, engine_io.READ_FORMATS,
                           engine_io.WRITE_FORMATS)
     args = parser.parse_args(script_arguments())
     files = input_files(args.inputs, engine_io.READ_FORMATS)

@@ -97,7 +97,10 @@ class UDFR_PT_advanced(bpy.types.Panel):
         props = scene_settings(context.scene)
         layout.prop(props, "seed")
         layout.prop(props, "min_component_faces")
-        layout.prop(props, "outlier_ratio")
+        layout.prop(props, "outliers")
+        row = layout.row()
+        row.enabled = props.outliers != "keep"
+        row.prop(props, "outlier_ratio")
 
 
 CLASSES = (UDFR_PT_reconstruct, UDFR_PT_advanced)

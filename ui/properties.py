@@ -21,6 +21,13 @@ RADIUS_MODE_ITEMS = (
      "A small network picks the ball size for each spot from the points around it"),
 )
 
+OUTLIER_ITEMS = (
+    ("auto", "Auto", "Drop stray points when they are at least 1 % of the cloud (a scan with "
+                     "strays); keep a cleaner cloud as it is"),
+    ("drop", "Drop", "Always drop points isolated from the surface"),
+    ("keep", "Keep", "Use every point"),
+)
+
 DEVICE_ITEMS = (
     ("auto", "Auto", "Use the graphics card when PyTorch with CUDA is installed, else the CPU"),
     ("cpu", "CPU", "Always compute on the processor"),
@@ -107,12 +114,17 @@ class UDFR_SceneSettings(bpy.types.PropertyGroup):
                     "(0 keeps every piece)",
         default=_DEFAULTS.min_component_faces, min=0, soft_max=10000,
     )
+    outliers: EnumProperty(
+        name="Outliers",
+        description="What to do with stray points floating off the surface",
+        items=OUTLIER_ITEMS,
+        default=_DEFAULTS.outliers,
+    )
     outlier_ratio: FloatProperty(
         name="Outlier Ratio",
-        description="Drop stray points first: a point whose gap to its neighbours is more than "
-                    "this many times that of the points around it (1.5 to 20; lower drops more, "
-                    "0 keeps every point)",
-        default=_DEFAULTS.outlier_ratio, min=0.0, max=20.0, step=10, precision=1,
+        description="A point is stray when its gap to its neighbours is more than this many "
+                    "times that of the points around it (lower finds more)",
+        default=_DEFAULTS.outlier_ratio, min=1.5, max=20.0, step=10, precision=1,
     )
 
 
@@ -129,6 +141,7 @@ def to_settings(props: UDFR_SceneSettings) -> ReconstructSettings:
         device=props.device,
         seed=props.seed,
         min_component_faces=props.min_component_faces,
+        outliers=props.outliers,
         outlier_ratio=round(props.outlier_ratio, 6),
     ).validate()
 

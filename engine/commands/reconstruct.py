@@ -12,7 +12,7 @@ import sys
 import threading
 import time
 
-from ..settings import DEVICES, RADIUS_MODES, ReconstructSettings
+from ..settings import DEVICES, OUTLIER_POLICIES, RADIUS_MODES, ReconstructSettings
 
 
 def add_arguments(parser) -> None:
@@ -41,10 +41,14 @@ def add_arguments(parser) -> None:
                         help=f"seed of every random choice (default {defaults.seed})")
     parser.add_argument("--min-component-faces", type=int, default=defaults.min_component_faces,
                         help="drop output pieces with fewer faces (default 0: keep all)")
+    parser.add_argument("--outliers", choices=OUTLIER_POLICIES, default=defaults.outliers,
+                        help="points isolated from the surface: drop them, keep them, or auto: "
+                             "drop them when they are at least 1 %% of the cloud (default "
+                             f"{defaults.outliers})")
     parser.add_argument("--outlier-ratio", type=float, default=defaults.outlier_ratio,
-                        help=f"drop points whose gap to their neighbours is more than this many "
-                             f"times that of the points around them (default "
-                             f"{defaults.outlier_ratio}; 0 keeps every point)")
+                        help="a point is isolated when its gap to its neighbours is more than "
+                             "this many times that of the points around it (default "
+                             f"{defaults.outlier_ratio}; lower finds more)")
     parser.add_argument("--udf-source", choices=("network", "nearest"), default="network",
                         help="the learned backbone, or the distance to the nearest input point "
                              "(a non-learned baseline); default network")
@@ -94,7 +98,7 @@ def run(args) -> int:
         radius_mode=args.radius_mode, radius=args.radius, parent_radius=args.parent_radius,
         rho_min=args.rho_min, rho_max=args.rho_max, resolution=args.resolution,
         device=args.device, seed=args.seed, min_component_faces=args.min_component_faces,
-        outlier_ratio=args.outlier_ratio,
+        outliers=args.outliers, outlier_ratio=args.outlier_ratio,
     ).validate()
     progress = _StderrProgress(args.quiet)
     stop = threading.Event()

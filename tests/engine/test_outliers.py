@@ -46,26 +46,39 @@ def test_the_answer_ignores_units_and_duplicates():
     assert np.array_equal(find_outliers(doubled), np.tile(found, 10))
 
 
-def test_ratio_zero_keeps_every_point():
+def test_ratio_zero_finds_none():
     points, _ = plane_with_strays()
     assert not find_outliers(points, ratio=0).any()
 
 
 def test_reconstruct_drops_the_strays_and_says_so():
-    points, stray = plane_with_strays(surface=8000, strays=200, seed=3)
-    settings = ReconstructSettings(resolution=32, device="cpu")
-    result = reconstruct(points, settings, udf_source="nearest")
+    points, stray = plane_with_strays(surface=8000, strays=200, seed=3)  # 2.4 % strays
+    result = reconstruct(points, ReconstructSettings(resolution=32, device="cpu"),
+                         udf_source="nearest")
     assert result.stats["outliers"] >= 180
     assert result.stats["points"] == len(points) - result.stats["outliers"]
-    assert "outliers" in result.messages[0]
+    assert result.messages[0].startswith("dropped")
     # without the strays, the mesh is the square: every vertex within a voxel of z = 0
     assert np.abs(result.mesh.vertices[:, 2]).max() < 1.0 / 32
-    kept = reconstruct(points, ReconstructSettings(resolution=32, device="cpu", outlier_ratio=0),
+    kept = reconstruct(points, ReconstructSettings(resolution=32, device="cpu", outliers="keep"),
                        udf_source="nearest")
     assert kept.stats["outliers"] == 0
     assert np.abs(kept.mesh.vertices[:, 2]).max() > 0.05  # the strays grew pieces of their own
 
 
-def test_an_outlier_ratio_out_of_range_is_refused():
-    with pytest.raises(InputError, match="outlier ratio"):
-        ReconstructSettings(outlier_ratio=1.0).validate()
+def test_auto_keeps_a_few_flagged_points_and_drop_drops_them():
+    points, stray = plane_with_strays(surface=8000, strays=20, seed=4)  # 0.25 % strays
+    auto = reconstruct(points, ReconstructSettings(resolution=32, device="cpu"),
+                       udf_source="nearest")
+    assert auto.stats["outliers"] == 0
+    assert "kept" in auto.messages[0]
+    drop = reconstruct(points, ReconstructSettings(resolution=32, device="cpu", outliers="drop"),
+                       udf_source="nearest")
+    assert drop.stats["outliers"] >= 18
+
+
+@pytest.mark.parametrize("values, message", [({"outlier_ratio": 1.0}, "outlier ratio"),
+                                             ({"outliers": "maybe"}, "outliers must be")])
+def test_outlier_settings_out_of_range_are_refused(values, message):
+    with pytest.raises(InputError, match=message):
+        ReconstructSettings(**values).validate()
