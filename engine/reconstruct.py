@@ -41,13 +41,14 @@ class ReconstructResult:
     messages : list of str
         Notes for the user (warnings from the mesher, too sparse a cloud, ...).
     timings : dict of str to float
-        Seconds per stage: ``outliers``, ``frame``, ``band``, ``udf``, ``meshing``, ``finish``, ``total``, and
-        the mesher's own stages as ``meshing_<stage>``.
+        Seconds per stage: ``outliers``, ``frame``, ``band``, ``udf``, ``meshing``, ``finish``,
+        ``total``, and the mesher's own stages as ``meshing_<stage>``.
     stats : dict
-        ``points`` (used, after outliers), ``outliers`` (dropped), ``grid_shape``, ``spacing``,
-        ``band_radius``, ``band_nodes``, ``queries`` (backbone evaluations), ``sparse_balls``,
-        ``mean_patch_points``, ``udf_source``, ``device``, ``iso`` (unit frame), ``components``
-        (pieces of the output), ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
+        ``points`` (used), ``outliers`` (dropped), ``outliers_found`` (flagged: ``auto`` keeps
+        them when they are few), ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``,
+        ``queries`` (backbone evaluations), ``sparse_balls``, ``mean_patch_points``,
+        ``udf_source``, ``device``, ``iso`` (unit frame), ``components`` (pieces of the output),
+        ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
     """
 
     mesh: Mesh
@@ -110,7 +111,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
                          f"give one colour per point or none")
     progress(0.0, "finding outliers")
     mark = time.perf_counter()
-    points, colors, outlier_count, outlier_note = _drop_outliers(points, colors, settings)
+    given = len(points)
+    points, colors, outliers_found, outliers = _drop_outliers(points, colors, settings)
     timings["outliers"] = time.perf_counter() - mark
     frame = UnitFrame.from_points(points)
     points_unit = frame.to_unit(points)
@@ -146,7 +148,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings["finish"] = time.perf_counter() - mark
     timings["total"] = time.perf_counter() - started
 
-    stats = {"points": int(len(points_unit)), "outliers": outlier_count, **band.stats,
+    stats = {"points": int(len(points_unit)), "outliers": outliers,
+             "outliers_found": outliers_found, **band.stats,
              "queries": (band.stats["network_queries"] - band.stats["sparse_balls"]
                          if udf_source == "network" else 0),
              "iso": float(meshed.iso), "components": _piece_count(result_mesh),
@@ -154,8 +157,10 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
              "meshing": dict(meshed.stats)}
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
-    if outlier_note:
-        messages.insert(0, outlier_note)
+    if outliers:
+        share = 100.0 * outliers / given
+        messages.insert(0, f"dropped {outliers:,} isolated points ({share:.1f} %) as outliers; "
+                           f"set outliers to 'keep' to use every point")
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
@@ -168,29 +173,22 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings):
     """The points (and colours) without the outliers, as ``settings.outliers`` says.
 
-    Returns ``(points, colors, dropped, note)``; ``note`` tells the user what was found and
-    done (None when nothing was found). Refuses, saying why, when too few points are left.
+    Returns ``(points, colors, found, dropped)``: how many points the test flagged, and how many
+    of them were dropped (all or none). Refuses, saying why, when too few points would be left.
     """
     if settings.outliers == "keep":
-        return points, colors, 0, None
+        return points, colors, 0, 0
     outlier = find_outliers(points, settings.outlier_ratio)
     found = int(outlier.sum())
-    share = 100.0 * found / len(points)
-    if not found:
-        return points, colors, 0, None
-    if settings.outliers == "auto" and found < AUTO_SHARE * len(points):
-        return points, colors, 0, (
-            f"{found:,} points ({share:.1f} %) look isolated but were kept: so few are more "
-            f"often the sparse edge of a scan than strays (outliers 'drop' drops them)")
+    if not found or (settings.outliers == "auto" and found < AUTO_SHARE * len(points)):
+        return points, colors, found, 0
     kept = points[~outlier]
     try:
         validate_points(kept)
     except InputError as error:
         raise InputError(f"{error} (after dropping {found:,} of {len(points):,} points as "
                          f"outliers; set outliers to 'keep' to use every point)") from None
-    colors = None if colors is None else np.asarray(colors)[~outlier]
-    return kept, colors, found, (f"dropped {found:,} isolated points ({share:.1f} %) as "
-                                 f"outliers (outliers 'keep' uses every point)")
+    return kept, None if colors is None else np.asarray(colors)[~outlier], found, found
 
 
 def meshing_settings(settings: ReconstructSettings):
