@@ -65,7 +65,10 @@ def test_panel_settings_become_the_engine_settings(scene, extension):
     assert properties.to_settings(scene.udf_reconstruction) == \
         settings_module.ReconstructSettings(), "panel defaults are the engine's defaults"
     scene.udf_reconstruction.resolution = 80
-    assert properties.to_settings(scene.udf_reconstruction).resolution == 80
+    scene.udf_reconstruction.outliers = "keep"
+    scene.udf_reconstruction.outlier_ratio = 3.0
+    settings = properties.to_settings(scene.udf_reconstruction)
+    assert (settings.resolution, settings.outliers, settings.outlier_ratio) == (80, "keep", 3.0)
 
 
 def test_preferences_list_the_dependencies(extension):
