@@ -152,8 +152,20 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
     if udf_source == "nearest":
         ours.__name__ = "nearest-udf"
     else:
-        ours.__name__ = "ours" if radius_mode == "fixed" else f"ours-{radius_mode}"
+        ours.__name__ = ours_name(radius_mode, config.radius)
     return ours
+
+
+def ours_name(radius_mode: str = "fixed", radius: float = None) -> str:
+    """The result name of ours: ``ours`` (fixed, default radius), ``ours-r<radius>`` (fixed,
+    another radius) or ``ours-<mode>``; the JSON files are named after it."""
+    from ..settings import ReconstructSettings
+
+    if radius_mode != "fixed":
+        return f"ours-{radius_mode}"
+    if radius is None or radius == ReconstructSettings().radius:
+        return "ours"
+    return f"ours-r{radius:g}"
 
 
 def _check_radius_mode(config) -> None:

@@ -29,6 +29,9 @@ def add_arguments(parser) -> None:
                              "metrics' sampling floor) (default ours)")
     parser.add_argument("--radius-mode", default="fixed",
                         help="radius mode of ours: fixed, curvature or learned (default fixed)")
+    parser.add_argument("--radius", type=float, default=None,
+                        help="ball radius of ours in fixed mode, unit frame (default: the "
+                             "engine's, 0.018); results are then named ours-r<radius>")
     parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("all",))
     parser.add_argument("--condition", default="all", choices=CONDITION_NAMES + ("all",))
     parser.add_argument("--count", type=int, default=20, help="test shapes per domain (default 20)")
@@ -76,6 +79,8 @@ def _factory(args, name: str, radius_mode: str):
         options = {"resolution": args.resolution, "device": args.device}
         if name == "ours":
             options["radius_mode"] = radius_mode
+            if args.radius is not None:
+                options["radius"] = args.radius
     return functools.partial(make_method, name, **options)
 
 
@@ -129,9 +134,9 @@ def _report(args, domains, conditions) -> int:
 
     from ..bench.harness import format_table
 
-    name = args.method
-    if name == "ours" and args.radius_mode != "fixed":
-        name = f"ours-{args.radius_mode}"
+    from ..bench.methods import ours_name
+
+    name = ours_name(args.radius_mode, args.radius) if args.method == "ours" else args.method
     results, missing = [], []
     for condition in conditions:
         for domain in domains:

@@ -311,6 +311,14 @@ def test_registry_reports_unavailable_methods():
     assert method.__name__ == "nearest-udf"
 
 
+def test_results_of_another_radius_get_their_own_name():
+    from engine.bench import methods
+
+    assert methods.make_method("ours", radius=0.024).__name__ == "ours-r0.024"
+    assert methods.make_method("ours", radius=0.018).__name__ == "ours"
+    assert methods.ours_name("learned", 0.024) == "ours-learned"
+
+
 def test_poisson_is_deterministic_and_closes_a_sphere():
     pytest.importorskip("open3d")
     from engine.bench.methods import make_method
