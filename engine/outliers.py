@@ -86,12 +86,12 @@ def _isolated(points: np.ndarray, ratio: float) -> np.ndarray:
     spacing = np.empty(len(points))
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
-        distances, _ = tree.query(block, k=neighbours + 1)
+        distances, _ = tree.query(block, k=neighbours + 1, workers=-1)
         spacing[start:start + len(block)] = distances[:, 1:].mean(axis=1)
     isolated = np.empty(len(points), dtype=bool)
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
-        _, nearest = tree.query(block, k=context + 1)
+        _, nearest = tree.query(block, k=context + 1, workers=-1)
         typical = np.median(spacing[nearest[:, 1:]], axis=1)
         isolated[start:start + len(block)] = spacing[start:start + len(block)] > ratio * typical
     return isolated
