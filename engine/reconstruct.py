@@ -114,6 +114,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     given = len(points)
     points, colors, outliers_found, outliers = _drop_outliers(points, colors, settings)
     timings["outliers"] = time.perf_counter() - mark
+    check_cancel(cancel)
     frame = UnitFrame.from_points(points)
     points_unit = frame.to_unit(points)
     tree = cKDTree(points_unit)
