@@ -59,9 +59,8 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO) -> np.ndarra
         True for outliers. Copies of one position share one answer.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    outlier = np.zeros(len(points), dtype=bool)
     if ratio <= 0 or len(points) == 0:
-        return outlier
+        return np.zeros(len(points), dtype=bool)
     distinct, copy_of = np.unique(points, axis=0, return_inverse=True)
     flagged = np.zeros(len(distinct), dtype=bool)
     for _ in range(ROUNDS):
@@ -72,8 +71,7 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO) -> np.ndarra
         if not isolated.any():
             break
         flagged[kept[isolated]] = True
-    outlier[:] = flagged[copy_of.reshape(-1)]
-    return outlier
+    return flagged[copy_of.reshape(-1)]
 
 
 def _isolated(points: np.ndarray, ratio: float) -> np.ndarray:
