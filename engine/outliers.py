@@ -94,8 +94,7 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO) -> np.ndarra
         if not isolated.any():
             break
         flagged[kept[isolated]] = True
-    kept = np.flatnonzero(~flagged)
-    if flagged.any() and len(kept) >= FLAT_NEIGHBOURS:
+    if flagged.any() and np.count_nonzero(~flagged) >= FLAT_NEIGHBOURS:
         flagged[_on_the_surface(distinct, flagged)] = False
     return flagged[copy_of.reshape(-1)]
 
