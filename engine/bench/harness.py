@@ -149,7 +149,8 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
                   seed: int = 0, samples: int = 100_000, progress=None, *, name: str = None,
                   dataset=None, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
                   pass_ground_truth: bool = False, jobs: int = 1,
-                  method_factory: Optional[Callable[[], Callable]] = None) -> dict:
+                  method_factory: Optional[Callable[[], Callable]] = None,
+                  earlier: Optional[dict] = None) -> dict:
     """Run ``method`` on the first ``count`` test shapes of ``domain`` under ``condition``.
 
     Parameters
@@ -177,6 +178,11 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
         default dataset; each process limits numpy, BLAS and torch to one thread.
     method_factory : picklable callable that builds ``method`` (in each worker process), e.g.
         ``functools.partial(methods.make_method, "ours", resolution=256)``
+    earlier : a result of an earlier run of the same method, domain, condition, samples and
+        seed (:func:`read_json`): its shapes are kept as they are (also those past ``count``, after
+        the others) and only the missing ones among the first ``count`` run, so a long benchmark
+        can be extended or finished in several sittings. A result of another method or protocol
+        raises ``ValueError``.
 
     Returns
     -------
@@ -192,21 +198,26 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
     dataset = dataset or _default_dataset()
     name = name or getattr(method, "__name__", "method")
     crop = getattr(dataset, "crop_to_input", None) if domain in CROP_DOMAINS else None
-    shape_seeds = list(dataset.test_seeds(domain, count))[:count]
-    tasks = [(int(shape_seed), domain, condition, samples, seed, crop is not None,
-              crop_max_dist, pass_ground_truth) for shape_seed in shape_seeds]
+    shape_seeds = [int(shape_seed) for shape_seed in dataset.test_seeds(domain, count)][:count]
+    kept = _rows_to_keep(earlier, name, domain, condition, samples, seed)
+    tasks = [(shape_seed, domain, condition, samples, seed, crop is not None,
+              crop_max_dist, pass_ground_truth)
+             for shape_seed in shape_seeds if shape_seed not in kept]
     label = f"{name} {domain}/{condition}"
-    rows: List[dict] = []
-    measure = None
-    if jobs > 1:
+    new_rows: List[dict] = []
+    measure = earlier.get("memory_measure") if earlier else None
+    if jobs > 1 and tasks:
         for row, measure in _run_parallel(method_factory, tasks, jobs, progress, label):
-            rows.append(row)
+            new_rows.append(row)
     else:
         for index, task in enumerate(tasks):
             if progress is not None:
                 progress(index / max(len(tasks), 1), f"{label} shape {index + 1}/{len(tasks)}")
             row, measure = _run_shape(method, dataset, *task)
-            rows.append(row)
+            new_rows.append(row)
+    by_seed = {**kept, **{row["shape_seed"]: row for row in new_rows}}
+    rows = [by_seed[shape_seed] for shape_seed in shape_seeds]
+    rows += [row for shape_seed, row in kept.items() if shape_seed not in shape_seeds]
     if progress is not None:
         progress(1.0, f"{name} {domain}/{condition} done")
 
@@ -224,6 +235,21 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
     }
 
 
+def _rows_to_keep(earlier: Optional[dict], name: str, domain: str, condition: str,
+                  samples: int, seed: int) -> Dict[int, dict]:
+    """The rows of an earlier result, by shape seed, after checking it is the same benchmark."""
+    if earlier is None:
+        return {}
+    wanted = {"method": name, "domain": domain, "condition": condition, "samples": samples,
+              "seed": seed}
+    differs = {key: (earlier.get(key), value) for key, value in wanted.items()
+               if earlier.get(key) != value}
+    if differs:
+        detail = ", ".join(f"{key} {old!r} (now {new!r})" for key, (old, new) in differs.items())
+        raise ValueError(f"the earlier result is another benchmark: {detail}")
+    return {int(row["shape_seed"]): row for row in earlier["shapes"]}
+
+
 def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, condition: str,
                samples: int, seed: int, cropped: bool, crop_max_dist: float,
                pass_ground_truth: bool):
@@ -235,7 +261,8 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
     cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
     crop = dataset.crop_to_input if cropped else None
     visible = dataset.make_input(gt, domain, "clean", shape_seed).points if cropped else None
-    row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False, "error": None}
+    row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False, "error": None,
+           "run_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     pred = None
     cpu_start = time.process_time()
     with PeakMemory() as memory:
@@ -413,6 +440,17 @@ def _strict(value):
 def result_filename(result: dict) -> str:
     """``<method>_<domain>_<condition>.json``."""
     return f"{result['method']}_{result['domain']}_{result['condition']}.json"
+
+
+def read_json(path: str) -> dict:
+    """A result written by :func:`write_json`, with the CD of shapes without a surface back to inf."""
+    with open(path) as handle:
+        result = json.load(handle)
+    for row in result["shapes"]:
+        for key in ("cd_l1_x100", "cd_l2"):
+            if row.get(key) is None:
+                row[key] = math.inf
+    return result
 
 
 def write_json(result: dict, out_dir: str) -> str:

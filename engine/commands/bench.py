@@ -11,6 +11,7 @@ Examples::
     python -m engine bench --method poisson --domain all --condition clean --count 20
     python -m engine bench --method ours --radius-mode fixed --domain cars --condition noisy
     python -m engine bench --table --condition clean --count 20
+    python -m engine bench --method ours --domain rooms --condition noisy --count 30 --resume
     python -m engine bench --method poisson --report     # table of the JSON files in --out
     python -m engine bench --table --report --condition clean   # Table I from those files
 """
@@ -51,6 +52,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--report", action="store_true",
                         help="run nothing: print the table (with --table, Table I) of the JSON results "
                              "already in --out")
+    parser.add_argument("--resume", action="store_true",
+                        help="keep the shapes already scored in --out's JSON for the same method, "
+                             "domain, condition, samples and seed; run only the missing ones "
+                             "(extends a run to a larger --count, or finishes an interrupted one)")
     parser.add_argument("--quiet", action="store_true", help="no per-shape progress on stderr")
 
 
@@ -112,14 +117,15 @@ def run(args) -> int:
     except MethodUnavailable as error:
         print(f"{args.method}: not available: {error}", file=sys.stderr)
         return 1
+    name = "ground-truth" if oracle else method.__name__
     results = []
     for condition in conditions:
         for domain in domains:
             result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
-                                   samples=args.samples, progress=progress,
-                                   name="ground-truth" if oracle else None,
+                                   samples=args.samples, progress=progress, name=name,
                                    pass_ground_truth=oracle, jobs=1 if oracle else args.jobs,
-                                   method_factory=factory)
+                                   method_factory=factory,
+                                   earlier=_earlier(args, name, domain, condition))
             path = write_json(result, args.out)
             print(f"wrote {path}", file=sys.stderr)
             results.append(result)
@@ -127,13 +133,24 @@ def run(args) -> int:
     return 0
 
 
-def _report(args, domains, conditions) -> int:
-    """Print the table of the results in ``--out`` for the selected method, domains, conditions."""
-    import json
+def _earlier(args, name: str, domain: str, condition: str):
+    """With ``--resume``, the result already in ``--out`` for this row (None when there is none)."""
     import os
 
-    from ..bench.harness import format_table
+    from ..bench.harness import read_json, result_filename
 
+    path = os.path.join(args.out, result_filename(
+        {"method": name, "domain": domain, "condition": condition}))
+    if not args.resume or not os.path.exists(path):
+        return None
+    return read_json(path)
+
+
+def _report(args, domains, conditions) -> int:
+    """Print the table of the results in ``--out`` for the selected method, domains, conditions."""
+    import os
+
+    from ..bench.harness import format_table, read_json
     from ..bench.methods import ours_name
 
     name = ours_name(args.radius_mode, args.radius) if args.method == "ours" else args.method
@@ -142,8 +159,7 @@ def _report(args, domains, conditions) -> int:
         for domain in domains:
             path = os.path.join(args.out, f"{name}_{domain}_{condition}.json")
             if os.path.exists(path):
-                with open(path) as handle:
-                    results.append(json.load(handle))
+                results.append(read_json(path))
             else:
                 missing.append(path)
     print(format_table(results))
@@ -155,16 +171,14 @@ def _report(args, domains, conditions) -> int:
 def _load_result(args, method: str, domain: str, condition: str):
     """A result written earlier to ``--out``, cut to its first ``--count`` shapes; None when
     missing or shorter."""
-    import json
     import os
 
-    from ..bench.harness import first_shapes
+    from ..bench.harness import first_shapes, read_json
 
     path = os.path.join(args.out, f"{method}_{domain}_{condition}.json")
     if not os.path.exists(path):
         return None
-    with open(path) as handle:
-        return first_shapes(json.load(handle), args.count)
+    return first_shapes(read_json(path), args.count)
 
 
 def _run_table(args, domains, conditions, progress) -> int:
@@ -193,7 +207,8 @@ def _run_table(args, domains, conditions, progress) -> int:
             for domain in domains:
                 result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
                                        samples=args.samples, progress=progress, jobs=args.jobs,
-                                       method_factory=factory)
+                                       method_factory=factory, earlier=_earlier(
+                                           args, method.__name__, domain, condition))
                 print(f"wrote {write_json(result, args.out)}", file=sys.stderr)
                 cells[mode][domain] = result
         print(format_table_one(cells, domains, condition, args.count, args.samples))

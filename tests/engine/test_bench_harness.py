@@ -350,3 +350,65 @@ def test_parallel_shapes_score_as_the_serial_run():
             assert b[key] == pytest.approx(a[key], rel=1e-6), key
     with pytest.raises(ValueError, match="method_factory"):
         run_benchmark(factory(), "garments", "clean", 1, jobs=2)
+
+
+def test_resume_runs_only_the_missing_shapes_and_keeps_the_rest(tmp_path):
+    calls = []
+
+    def counting(cloud):
+        calls.append(len(cloud))
+        return sphere(2)
+
+    first = run(counting, count=2)
+    path = write_json(first, str(tmp_path))
+    calls.clear()
+    extended = run(counting, count=3, earlier=harness.read_json(path))
+    assert len(calls) == 1                       # only the third shape ran
+    assert [row["shape_seed"] for row in extended["shapes"]] == [0, 1, 2]
+    assert extended["shapes"][:2] == first["shapes"]
+    fresh = run(counting, count=3)
+    for key in METRIC_KEYS:                      # the same scores as one run over 3 shapes
+        assert extended["summary"][key] == pytest.approx(fresh["summary"][key])
+    # a smaller count never drops what was scored
+    calls.clear()
+    shorter = run(counting, count=1, earlier=extended)
+    assert not calls and [row["shape_seed"] for row in shorter["shapes"]] == [0, 1, 2]
+
+
+def test_resume_refuses_another_benchmark_and_reads_failures_back(tmp_path):
+    def broken(cloud):
+        raise RuntimeError("no")
+
+    failed = run(broken, count=1)
+    earlier = harness.read_json(write_json(failed, str(tmp_path)))
+    assert earlier["shapes"][0]["cd_l1_x100"] == math.inf
+    resumed = run(broken, count=1, earlier=earlier)
+    assert resumed["summary"]["failed"] == 1 and resumed["summary"]["cd_l1_x100"] is None
+    with pytest.raises(ValueError, match="samples"):
+        run_benchmark(broken, "cars", "clean", 1, samples=SAMPLES + 1, dataset=fake_dataset(),
+                      earlier=earlier)
+    with pytest.raises(ValueError, match="condition"):
+        run_benchmark(broken, "cars", "noisy", 1, samples=SAMPLES, dataset=fake_dataset(),
+                      earlier=earlier)
+
+
+def test_cli_resume_extends_the_json(tmp_path, monkeypatch, capsys):
+    from engine.__main__ import main
+    from engine.bench import methods
+
+    monkeypatch.setattr(harness, "_default_dataset", lambda: fake_dataset())
+    calls = []
+
+    def toy(cloud):
+        calls.append(1)
+        return sphere(2)
+
+    monkeypatch.setitem(methods.METHODS, "toy", lambda **options: toy)
+    common = ["bench", "--method", "toy", "--domain", "cars", "--condition", "clean",
+              "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"]
+    assert main(common + ["--count", "1"]) == 0
+    assert main(common + ["--count", "2", "--resume"]) == 0
+    assert len(calls) == 2
+    assert "| cars | clean | 2 | 0 |" in capsys.readouterr().out
+    saved = json.loads((tmp_path / "toy_cars_clean.json").read_text())
+    assert [row["shape_seed"] for row in saved["shapes"]] == [0, 1]
