@@ -184,7 +184,7 @@ def _load_result(args, method: str, domain: str, condition: str):
 def _run_table(args, domains, conditions, progress) -> int:
     """Table I: one row per radius mode of ``ours``, columns per domain. With ``--report`` the
     table is assembled from the JSON results already in ``--out`` (runs done one at a time)."""
-    from ..bench.harness import run_benchmark, write_json
+    from ..bench.harness import first_shapes, run_benchmark, write_json
     from ..bench.methods import MethodUnavailable
 
     for condition in conditions:
@@ -210,7 +210,7 @@ def _run_table(args, domains, conditions, progress) -> int:
                                        method_factory=factory, earlier=_earlier(
                                            args, method.__name__, domain, condition))
                 print(f"wrote {write_json(result, args.out)}", file=sys.stderr)
-                cells[mode][domain] = result
+                cells[mode][domain] = first_shapes(result, args.count)  # --resume may keep more
         print(format_table_one(cells, domains, condition, args.count, args.samples))
         print()
     return 0

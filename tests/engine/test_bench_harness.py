@@ -258,6 +258,7 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
         return ours
 
     dataset = fake_dataset()
+    real_run_shape = harness._run_shape
     monkeypatch.setattr(harness, "_default_dataset", lambda: dataset)
     monkeypatch.setitem(methods.METHODS, "ours", fake_ours)
     code = main(["bench", "--table", "--domain", "cars", "--condition", "clean", "--count", "1",
@@ -283,6 +284,16 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     lines = capsys.readouterr().out.splitlines()
     assert any(line.startswith("| fixed | not run (cars: no result with 2 shapes")
                for line in lines)
+    # --resume extends every mode's file by the missing shape only; the table uses 2 shapes
+    calls = []
+    monkeypatch.setattr(harness, "_run_shape",
+                        lambda method, *task: calls.append(task[1]) or real_run_shape(method, *task))
+    code = main(["bench", "--table", "--resume", "--domain", "cars", "--condition", "clean",
+                 "--count", "2", "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
+    assert code == 0 and calls == [1, 1]        # fixed and curvature, shape seed 1 each
+    assert "Table I (clean, 2 shapes per domain" in capsys.readouterr().out
+    saved = json.loads((tmp_path / "ours_cars_clean.json").read_text())
+    assert [row["shape_seed"] for row in saved["shapes"]] == [0, 1]
 
 
 def test_first_shapes_recomputes_the_summary():
