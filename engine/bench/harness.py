@@ -443,7 +443,7 @@ def result_filename(result: dict) -> str:
 
 
 def read_json(path: str) -> dict:
-    """A result written by :func:`write_json`, with the CD of shapes without a surface back to inf."""
+    """A result written by :func:`write_json`; the CD of shapes without a surface is inf again."""
     with open(path) as handle:
         result = json.load(handle)
     for row in result["shapes"]:

@@ -286,8 +286,12 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
                for line in lines)
     # --resume extends every mode's file by the missing shape only; the table uses 2 shapes
     calls = []
-    monkeypatch.setattr(harness, "_run_shape",
-                        lambda method, *task: calls.append(task[1]) or real_run_shape(method, *task))
+
+    def counted_run_shape(method, *task):
+        calls.append(task[1])  # the shape seed
+        return real_run_shape(method, *task)
+
+    monkeypatch.setattr(harness, "_run_shape", counted_run_shape)
     code = main(["bench", "--table", "--resume", "--domain", "cars", "--condition", "clean",
                  "--count", "2", "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
     assert code == 0 and calls == [1, 1]        # fixed and curvature, shape seed 1 each
