@@ -32,6 +32,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
+from .cpu_threads import cpu_threads, run_in_threads
 from .devices import resolve_device
 from .errors import InputError
 from .meshing import UDFGrid
@@ -261,6 +262,7 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     on_gpu = stats["device"] == "cuda"
     batch = CUDA_BATCH if on_gpu else CPU_BATCH
     group = batch if on_gpu else TRIM_GROUP  # a GPU prefers few large calls
+    threads = 1 if on_gpu else cpu_threads()
     values = np.empty(len(queries), dtype=np.float32)
     sparse = 0
     total_points = 0
@@ -290,7 +292,7 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
         chunk = nearest[start:stop].astype(np.float32)
         seen = np.flatnonzero(counts >= MIN_PATCH_POINTS)
         chunk[seen] = predict_trimmed(predictor, rel[seen], mask[seen], counts[seen],
-                                       group, cancel) * radii[seen]
+                                       group, cancel, threads) * radii[seen]
         values[start:stop] = chunk
         sparse += len(counts) - len(seen)
         total_points += int(counts[seen].sum())
@@ -341,16 +343,22 @@ def widen_sparse_balls(tree, points: np.ndarray, queries: np.ndarray, radii: np.
 
 def predict_trimmed(predictor: Predictor, rel: np.ndarray, mask: np.ndarray,
                      counts: np.ndarray, group_size: int,
-                     cancel: Optional[CancelFn] = None) -> np.ndarray:
+                     cancel: Optional[CancelFn] = None, threads: int = 1) -> np.ndarray:
     """UDF / r of patches with points, (B,) float64, computed on as few padding rows as possible.
 
     Padding rows never change the backbone's output, but they cost as much as real points. The
     patches are taken in order of point count, in groups of ``group_size``, each cut to its
-    largest count (at least ``MIN_WIDTH`` columns); ``cancel`` is checked between groups.
+    largest count (at least ``MIN_WIDTH`` columns); ``cancel`` is checked before each group.
+    With ``threads`` > 1 the groups run on that many threads (:mod:`engine.cpu_threads`); each
+    group's answer is the same either way.
     """
     out = np.empty(len(counts), dtype=np.float64)
-    for group, width in groups_by_count(counts, group_size, MIN_WIDTH):
+
+    def predict_group(item) -> None:
+        group, width = item
         check_cancel(cancel)
         out[group] = np.asarray(predictor(rel[group, :width], mask[group, :width]),
                                 dtype=np.float64).reshape(-1)
+
+    run_in_threads(predict_group, groups_by_count(counts, group_size, MIN_WIDTH), threads)
     return out
