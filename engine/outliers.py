@@ -22,7 +22,8 @@ surface of the first two rooms (69-89 % with a context of 64 points, whose media
 a room's empty middle set themselves), and drops 76-147 of their 45 000 surface points (108
 and 43 with the 64-point context, 188 and 84 with 256 but no surface test). On the clean,
 sparse and noisy scans of those rooms it flags 0.1-0.3 %: edge points the surface test does
-not spare. Hence the ``auto`` policy (:data:`AUTO_SHARE`). docs/benchmarks.md has the effect on the meshes.
+not spare. Hence the ``auto`` policy (:data:`AUTO_SHARE`). docs/benchmarks.md has the effect on
+the meshes.
 """
 
 import numpy as np
