@@ -12,22 +12,26 @@ Two stages (DCUDF, Hou et al. 2023), written with analytic gradients in voxel un
 ``grad d = V / |V|`` from the closest-point field. Steps are VectorAdam's (Ling et al. 2022): one
 second moment per vertex (the squared norm of its gradient), so each vertex moves at most about
 ``lr`` voxels per iteration whatever the scale of the energy.
+
+Each iteration runs as passes over row ranges of the vertices and faces, one range per CPU
+thread (:class:`_Cover`); the vertices come out the same, bit for bit, on any number of threads.
 """
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from ..cpu_threads import cpu_threads
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
 
 STALL_CHECK = 10  # iterations between two convergence checks of the low-step phases
 STALL_MEAN = 1e-3  # voxels: the mean vertex / centroid distance improved less than this
 STALL_MAX = 1e-2  # voxels: and the largest one improved less than this
-CHUNK = 65536  # points per chunk of a threaded field query
+SPLIT_VERTICES = 32768  # covers with fewer vertices run on one thread
+BETA1, BETA2, EPS = 0.9, 0.999, 1e-8  # VectorAdam
 
 
 @dataclass
@@ -52,29 +56,9 @@ def _unit_inplace(vectors: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return vectors
 
 
-class _FieldQuery:
-    """``field.closest_index`` on many points, split over two threads when there are enough.
-
-    The points are independent, so the split changes nothing in the results (numpy releases the
-    GIL in the gathers and arithmetic of the grid interpolation).
-    """
-
-    def __init__(self, field, points: int):
-        threads = min(2, os.cpu_count() or 1)
-        self.field = field
-        self.pool = ThreadPoolExecutor(threads) if threads > 1 and points >= 2 * CHUNK else None
-
-    def __call__(self, points: np.ndarray):
-        if self.pool is None or len(points) < 2 * CHUNK:
-            return self.field.closest_index(points)
-        bounds = np.linspace(0, len(points), 3).astype(int)
-        parts = list(self.pool.map(self.field.closest_index,
-                                   [points[a:b] for a, b in zip(bounds[:-1], bounds[1:])]))
-        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
-
-    def close(self):
-        if self.pool is not None:
-            self.pool.shutdown()
+def _ranges(count: int, parts: int):
+    bounds = np.linspace(0, count, parts + 1).astype(int)
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 class StallCheck:
@@ -116,11 +100,109 @@ def distance_summary(dv: np.ndarray, dc: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Cover:
+    """The optimisation's state, and its passes over row ranges of the vertices and faces.
+
+    Every row of every pass depends only on arrays that an earlier pass finished (the sparse
+    operators are sliced by rows, which keeps each row's sum in the same order), so the ranges
+    can run on separate threads (numpy and scipy.sparse release the GIL) and the result is the
+    same, bit for bit, whatever the number of ranges.
+    """
+
+    def __init__(self, g: np.ndarray, faces: np.ndarray, edges: np.ndarray, field,
+                 laplacian_weight: float, parts: int):
+        n, m = len(g), len(faces)
+        self.g, self.faces, self.field = g, faces, field
+        self.lam2 = 2.0 * laplacian_weight
+        self.ratio = n / max(m, 1)
+        self.vrows, self.frows = _ranges(n, parts), _ranges(m, parts)
+        lap = mesh_ops.uniform_laplacian(n, edges)
+        cen = mesh_ops.centroid_matrix(n, faces)
+        self.inc = mesh_ops.incidence_matrix(n, faces)
+        self.lap = [lap[r] for r in self.vrows]
+        self.lap_t = [lap.T.tocsr()[r] for r in self.vrows]
+        self.cen = [cen[r] for r in self.frows]
+        self.cen_t = [cen.T.tocsr()[r] for r in self.vrows]
+        self.cents, self.face_grad = np.empty((m, 3)), np.empty((m, 3))
+        self.dv, self.dc = np.empty(n), np.empty(m)
+        self.grad, self.wd = np.empty_like(g), np.empty_like(g)
+        self.mom, self.vel = np.zeros_like(g), np.zeros(n)
+        self.weight = np.ones((n, 1))
+        self.area = np.empty(m)
+        self.n0 = self.c0 = None  # stage 2's frozen normals and centroids
+        self.capture = False  # the next face pass records c0
+
+    def face_pass(self, k: int, stage1: bool, areas: bool) -> None:
+        """Centroids, their distances and gradients (+ stage 2's sliding term); face areas."""
+        r = self.frows[k]
+        cents = self.cents[r]
+        cents[:] = self.cen[k] @ self.g
+        self.dc[r], vc = self.field.closest_index(cents)
+        grad = _unit_inplace(vc, self.dc[r])
+        if stage1:
+            if areas:
+                self.area[r] = mesh_ops.face_normals(self.g, self.faces[r])[1]
+        else:
+            if self.capture:
+                self.c0[r] = cents
+            n0 = self.n0[r]
+            a = cents - self.c0[r]
+            a -= n0 * np.einsum("ij,ij->i", a, n0)[:, None]
+            a = _unit_inplace(a, np.sqrt(np.einsum("ij,ij->i", a, a)))
+            a *= 0.5
+            grad += a
+        self.face_grad[r] = grad
+
+    def vertex_pass(self, k: int, stage1: bool) -> None:
+        """Vertex distances and gradients; stage 1's weighted umbrella vectors."""
+        r = self.vrows[k]
+        self.dv[r], vv = self.field.closest_index(self.g[r])
+        self.grad[r] = _unit_inplace(vv, self.dv[r])
+        if stage1:
+            wd = self.lap[k] @ self.g
+            wd -= self.g[r]
+            wd *= self.weight[r]
+            self.wd[r] = wd
+
+    def step_pass(self, k: int, stage1: bool, rate: float, ran: int) -> None:
+        """The full gradient of the vertices in range ``k`` and their VectorAdam step."""
+        r = self.vrows[k]
+        grad = self.grad[r]
+        if stage1:
+            lw = self.lap_t[k] @ self.wd
+            lw -= self.wd[r]
+            lw *= self.lam2
+            grad += lw
+        fg = self.cen_t[k] @ self.face_grad
+        fg *= self.ratio
+        grad += fg
+        mom, vel = self.mom[r], self.vel[r]
+        mom *= BETA1
+        mom += (1 - BETA1) * grad
+        vel *= BETA2
+        vel += (1 - BETA2) * np.einsum("ij,ij->i", grad, grad)
+        denom = np.sqrt(vel / (1 - BETA2 ** ran))
+        denom += EPS
+        step = mom / denom[:, None]
+        step *= rate / (1 - BETA1 ** ran)
+        self.g[r] -= step
+
+    def update_weights(self) -> None:
+        """``w_v = max(s) / s_v``, ``s_v = sqrt(vertex area)``, from the face pass's areas."""
+        s = np.sqrt(np.maximum(self.inc @ self.area, 1e-12))
+        self.weight = (s.max() / s)[:, None]
+
+    def start_stage2(self) -> None:
+        self.n0, _ = mesh_ops.face_normals(self.g, self.faces)
+        self.c0 = np.empty_like(self.cents)
+        self.capture = True
+
+
 def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: int = 400,
                    laplacian_weight: float = 16.0, lr: float = 0.05,
                    normal_start: float = 0.75, progress: Optional[ProgressFn] = None,
                    cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
-                   early_stop: bool = True):
+                   early_stop: bool = True, threads: Optional[int] = None):
     """Pull a double cover onto the zero set of ``field``.
 
     Parameters
@@ -147,6 +229,9 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
         the mean and max vertex and centroid distances still improve (by ``STALL_MEAN`` /
         ``STALL_MAX`` voxels) and stop when they stall. (Stopping stage 1 early the same way
         leaves thicker folds at open rims: its smoothing still works after the distances stall.)
+    threads : int, optional
+        CPU threads; by default :func:`~engine.cpu_threads.cpu_threads` for covers of at least
+        ``SPLIT_VERTICES`` vertices, else one. The result does not depend on it.
 
     Returns
     -------
@@ -154,76 +239,46 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: i
     iterations actually run).
     """
     progress = progress or no_progress
-    n, m = len(vertices), len(faces)
-    g = field.world_to_index(vertices)
+    if threads is None:
+        threads = cpu_threads() if len(vertices) >= SPLIT_VERTICES else 1
+    parts = max(1, min(int(threads), len(vertices), len(faces)))
     if edges is None:
         edges = mesh_ops.edge_topology(faces).edges
-    lap = mesh_ops.uniform_laplacian(n, edges)
-    lap_t = lap.T.tocsr()
-    cen = mesh_ops.centroid_matrix(n, faces)
-    cen_t = cen.T.tocsr()
-    inc = mesh_ops.incidence_matrix(n, faces)
-    ratio = n / max(m, 1)
+    cover = _Cover(field.world_to_index(vertices), faces, edges, field, laplacian_weight, parts)
     stage2 = int(round(normal_start * iterations))
     quiet = max(stage2, iterations // 2)  # stage 2 with the small step: may stop early
-    beta1, beta2, eps = 0.9, 0.999, 1e-8
-    mom = np.zeros_like(g)
-    vel = np.zeros(n)
-    weight = np.ones((n, 1))
-    step = np.empty_like(g)
-    n0 = c0 = None
-    query = _FieldQuery(field, n + m)
-    ran = 0
     stall = StallCheck(quiet, early_stop)
+    pool = ThreadPoolExecutor(parts) if parts > 1 else None
+
+    def run(task, *args):
+        if pool is None:
+            task(0, *args)
+        else:
+            for _ in pool.map(lambda k: task(k, *args), range(parts)):
+                pass
+
+    ran = 0
     try:
         for it in range(iterations):
             if ran % 4 == 0:
                 check_cancel(cancel)
                 progress(it / max(iterations, 1), f"optimising the cover ({it}/{iterations})")
-            cents = cen @ g
-            dv, vv = query(g)
-            dc, vc = query(cents)
-            if stall.due(it) and stall.stalled(distance_summary(dv, dc)):
+            stage1 = it < stage2
+            areas = stage1 and ran % 8 == 0  # area weights change slowly
+            if not stage1 and cover.n0 is None:
+                cover.start_stage2()
+            run(cover.face_pass, stage1, areas)
+            cover.capture = False
+            if areas:
+                cover.update_weights()
+            run(cover.vertex_pass, stage1)
+            if stall.due(it) and stall.stalled(distance_summary(cover.dv, cover.dc)):
                 break
-            grad = _unit_inplace(vv, dv)
-            face_grad = _unit_inplace(vc, dc)
-            if it < stage2:
-                if ran % 8 == 0:  # area weights change slowly
-                    _, area = mesh_ops.face_normals(g, faces)
-                    s = np.sqrt(np.maximum(inc @ area, 1e-12))
-                    weight = (s.max() / s)[:, None]
-                wd = lap @ g
-                wd -= g
-                wd *= weight
-                lw = lap_t @ wd
-                lw -= wd
-                lw *= 2.0 * laplacian_weight
-                grad += lw
-            else:
-                if n0 is None:
-                    n0, _ = mesh_ops.face_normals(g, faces)
-                    c0 = cents.copy()
-                a = cents - c0
-                a -= n0 * np.einsum("ij,ij->i", a, n0)[:, None]
-                a = _unit_inplace(a, np.sqrt(np.einsum("ij,ij->i", a, a)))
-                a *= 0.5
-                face_grad += a
-            fg = cen_t @ face_grad
-            fg *= ratio
-            grad += fg
             ran += 1
-            # VectorAdam, in place
-            mom *= beta1
-            mom += (1 - beta1) * grad
-            vel *= beta2
-            vel += (1 - beta2) * np.einsum("ij,ij->i", grad, grad)
-            denom = np.sqrt(vel / (1 - beta2 ** ran))
-            denom += eps
-            np.divide(mom, denom[:, None], out=step)
-            step *= learning_rate(it, iterations, lr) / (1 - beta1 ** ran)
-            g -= step
-        dv, _ = query(g)
-        dc, _ = query(cen @ g)
+            run(cover.step_pass, stage1, learning_rate(it, iterations, lr), ran)
+        run(cover.face_pass, True, False)
+        run(cover.vertex_pass, False)
     finally:
-        query.close()
-    return field.index_to_world(g), final_stats(ran, dv, dc)
+        if pool is not None:
+            pool.shutdown()
+    return field.index_to_world(cover.g), final_stats(ran, cover.dv, cover.dc)
