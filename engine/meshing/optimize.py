@@ -117,12 +117,14 @@ class _Cover:
         self.ratio = n / max(m, 1)
         self.vrows, self.frows = _ranges(n, parts), _ranges(m, parts)
         lap = mesh_ops.uniform_laplacian(n, edges)
+        lap_t = lap.T.tocsr()
         cen = mesh_ops.centroid_matrix(n, faces)
+        cen_t = cen.T.tocsr()
         self.inc = mesh_ops.incidence_matrix(n, faces)
         self.lap = [lap[r] for r in self.vrows]
-        self.lap_t = [lap.T.tocsr()[r] for r in self.vrows]
+        self.lap_t = [lap_t[r] for r in self.vrows]
         self.cen = [cen[r] for r in self.frows]
-        self.cen_t = [cen.T.tocsr()[r] for r in self.vrows]
+        self.cen_t = [cen_t[r] for r in self.vrows]
         self.cents, self.face_grad = np.empty((m, 3)), np.empty((m, 3))
         self.dv, self.dc = np.empty(n), np.empty(m)
         self.grad, self.wd = np.empty_like(g), np.empty_like(g)
@@ -193,6 +195,7 @@ class _Cover:
         self.weight = (s.max() / s)[:, None]
 
     def start_stage2(self) -> None:
+        """Freeze the face normals now; the next face pass freezes the centroids."""
         self.n0, _ = mesh_ops.face_normals(self.g, self.faces)
         self.c0 = np.empty_like(self.cents)
         self.capture = True
