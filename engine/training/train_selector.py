@@ -80,7 +80,17 @@ def train(args, data):
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser,
                                                           args.epochs * steps_per_epoch)
     generator = torch.Generator().manual_seed(args.seed)
+    # The head learns first, from the extra features alone (the code starts at zero, the encoder
+    # frozen): trained together from the start, the 256 code columns drown the 9 features and
+    # the selector answers one radius for every query (SELECTOR_CARD.md).
+    encoder = [p for name, p in model.named_parameters() if not name.startswith(("mlp", "out"))]
+    if args.head_epochs:
+        with torch.no_grad():
+            model.code.weight.zero_()
+            model.code.bias.zero_()
     for epoch in range(args.epochs):
+        for p in encoder:
+            p.requires_grad_(epoch >= args.head_epochs)
         order = torch.randperm(len(targets), generator=generator)
         total = 0.0
         radius_sum = torch.zeros(len(TRAINING_CONDITIONS), dtype=torch.float64)
@@ -147,6 +157,8 @@ def main(argv=None):
     parser.add_argument("--epochs", type=int, default=40)
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--lr", type=float, default=3e-3)
+    parser.add_argument("--head-epochs", type=int, default=5,
+                        help="first epochs that train only the head (encoder frozen, code at 0)")
     parser.add_argument("--expected-over", type=int, default=64,
                         help="nearest queries whose error curves are averaged into a target's "
                              "(1: the paper's per-query curves)")
