@@ -1,7 +1,8 @@
 """Train the radius selector against the frozen backbone and export ``engine/weights/selector.npz``.
 
     python -m engine.training.train_selector --out engine/weights/selector.npz --seed 0
-        [--shapes 40] [--queries 3000] [--epochs 40] [--cache-dir out/selector_cache]
+        [--shapes 40] [--queries 3000] [--epochs 10] [--head-epochs 5]
+        [--cache-dir out/selector_cache]
 
 1. Error curves: for ``--shapes`` car and garment *training* shapes each (benchmark train seeds,
    disjoint from the test seeds), ``--queries`` band queries per shape, the backbone's absolute
@@ -9,7 +10,10 @@
 2. Targets: each query's curve averaged over its ``--expected-over`` nearest queries of the same
    shape (the expected error there), the parabola vertex through that curve's minimum
    (:mod:`.radius_targets`) kept ``--target-inset`` of the span off the range's ends, loss
-   weight w = max(e) - min(e); loss w * |r_hat - r*| / (r_max - r_min).
+   weight w = max(e) - min(e); loss w * |r_hat - r*| / (r_max - r_min), plus a hinge on the
+   output logit 2 beyond the targets' largest (zero in use; it pulls outputs back out of the
+   sigmoid's flat ends). The first ``--head-epochs`` train the head only, from the standardised
+   extra features (code at 0, encoder frozen); then everything trains.
 3. Evaluation on held-out queries of held-out shapes (5 more training seeds per domain, rooms
    included although rooms are never trained on): mean absolute UDF error of every single fixed
    candidate radius, the curvature policy and the learned selector, run through the backbone at
@@ -154,15 +158,15 @@ def main(argv=None):
     parser.add_argument("--cache-dir", default="out/selector_cache")
     parser.add_argument("--shapes", type=int, default=40, help="training shapes per domain")
     parser.add_argument("--queries", type=int, default=3000, help="queries per shape")
-    parser.add_argument("--epochs", type=int, default=40)
-    parser.add_argument("--batch", type=int, default=1024)
+    parser.add_argument("--epochs", type=int, default=10)
+    parser.add_argument("--batch", type=int, default=512)
     parser.add_argument("--lr", type=float, default=3e-3)
     parser.add_argument("--head-epochs", type=int, default=5,
                         help="first epochs that train only the head (encoder frozen, code at 0)")
     parser.add_argument("--expected-over", type=int, default=64,
                         help="nearest queries whose error curves are averaged into a target's "
                              "(1: the paper's per-query curves)")
-    parser.add_argument("--target-inset", type=float, default=0.02,
+    parser.add_argument("--target-inset", type=float, default=0.005,
                         help="share of the radius span that targets keep off its ends")
     parser.add_argument("--parent-radius", type=float, default=0.024)
     parser.add_argument("--rho-min", type=float, default=0.5)
