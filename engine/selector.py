@@ -7,7 +7,13 @@ as ``rel = (p - q) / R`` (the patch contract of :mod:`engine.patches`). Features
 - a masked ResNet-PointNet over every STRIDE-th of those points (nearest first, so the stride
   keeps the radial spread of the whole ball while bounding cost) -> a 256-d code;
 - log(1 + N) with N the points in the parent ball (saturating at PARENT_POINTS);
-- a 6-bin radial density histogram: the share of the ball's points in each shell of width R/6.
+- a 6-bin radial density histogram: the share of the ball's points in each shell of width R/6;
+- the patch's roughness (:mod:`engine.patch_roughness`: thickness across its plane and the
+  residual of a fitted quadric), which tells noisy patches from clean ones.
+
+These extra features are standardised inside the network (``extra_mean``, ``extra_scale``: the
+training set's mean and inverse standard deviation, stored with the weights): unscaled, their
+small spread left the head blind to them and every query got the same radius.
 
 A 3-layer MLP with a sigmoid gives s in (0, 1); rho = rho_min + (rho_max - rho_min) * s and
 r_hat = rho * R. The range is applied at inference, so changing rho_min / rho_max needs no
@@ -22,6 +28,7 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
+from .patch_roughness import patch_roughness
 from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
                       patches_from_neighbours)
 from .weights_file import read_weights
@@ -30,6 +37,7 @@ DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
 PARENT_POINTS = 128
 STRIDE = 4
 HISTOGRAM_BINS = 6
+EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2  # log count, histogram, roughness
 
 DEFAULT_CONFIG = {
     "hidden": 32,      # H of the ResNet-PointNet
@@ -51,7 +59,8 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     -------
     rel : (Q, PARENT_POINTS // STRIDE, 3) float32, strided parent-patch points / R
     mask : (Q, PARENT_POINTS // STRIDE) bool
-    extra : (Q, 1 + HISTOGRAM_BINS) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram]
+    extra : (Q, EXTRA_FEATURES) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram,
+        roughness (thickness, quadric residual)], as measured (standardised in the network)
     """
     if neighbours is None:  # chunk by chunk: the lists take 2 kB per query
         parts = [parent_features(tree, points, queries[start:start + QUERY_CHUNK], parent_radius,
@@ -71,7 +80,8 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     hist = np.bincount(rows * HISTOGRAM_BINS + shell, minlength=len(distance) * HISTOGRAM_BINS)
     hist = hist.reshape(-1, HISTOGRAM_BINS) / np.maximum(counts, 1)[:, None]
     log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)
-    extra = np.column_stack([log_count, hist]).astype(np.float32)
+    roughness = patch_roughness(rel, mask)
+    extra = np.column_stack([log_count, hist, roughness]).astype(np.float32)
     return rel, mask, extra
 
 
@@ -84,7 +94,7 @@ def macs_per_query(config: Dict) -> int:
     """Multiply-accumulates of one selector pass (layers only)."""
     h, points = config["hidden"], PARENT_POINTS // STRIDE
     per_point = 3 * 2 * h + config["blocks"] * (2 * h * h + h * h + 2 * h * h)
-    widths = [config["code"] + 1 + HISTOGRAM_BINS] + config["mlp"] + [1]
+    widths = [config["code"] + EXTRA_FEATURES] + config["mlp"] + [1]
     mlp = sum(a * b for a, b in zip(widths, widths[1:]))
     return points * per_point + h * config["code"] + mlp
 
@@ -131,6 +141,7 @@ class NumpySelector:
             net = self._pooled_block(net, pooled, f"block{k}")            # (b, n, H)
         pooled = (net + pad).max(axis=1)
         code = self._linear(np.maximum(pooled, 0), "code")                # (b, 256)
+        extra = (extra - self.p["extra_mean"]) * self.p["extra_scale"]
         z = np.concatenate([code, extra], axis=1)
         for k in range(len(self.config["mlp"])):
             z = np.maximum(self._linear(z, f"mlp{k}"), 0)
@@ -182,7 +193,7 @@ def _torch_module_class():
             return self.fc1(torch.relu(self.fc0(torch.relu(x)))) + self.shortcut(x)
 
     class RadiusSelector(nn.Module):
-        """forward(rel (B,N,3), mask (B,N) bool, extra (B,7)) -> (B,) s in (0, 1)."""
+        """forward(rel (B,N,3), mask (B,N) bool, extra (B,EXTRA_FEATURES)) -> (B,) s in (0, 1)."""
 
         def __init__(self, config: Optional[Dict] = None):
             super().__init__()
@@ -192,12 +203,24 @@ def _torch_module_class():
             for k in range(self.config["blocks"]):
                 setattr(self, f"block{k}", Block(2 * h, h))
             self.code = nn.Linear(h, self.config["code"])
-            widths = [self.config["code"] + 1 + HISTOGRAM_BINS] + self.config["mlp"]
+            widths = [self.config["code"] + EXTRA_FEATURES] + self.config["mlp"]
             for k, (a, b) in enumerate(zip(widths, widths[1:])):
                 setattr(self, f"mlp{k}", nn.Linear(a, b))
             self.out = nn.Linear(widths[-1], 1)
+            self.register_buffer("extra_mean", torch.zeros(EXTRA_FEATURES))
+            self.register_buffer("extra_scale", torch.ones(EXTRA_FEATURES))
+
+        def standardise_extra(self, extra):
+            """Set the extra features' standardisation from training data (Q, EXTRA_FEATURES)."""
+            extra = torch.as_tensor(extra, dtype=torch.float32)
+            self.extra_mean.copy_(extra.mean(dim=0))
+            self.extra_scale.copy_(1.0 / (extra.std(dim=0) + 1e-6))
 
         def forward(self, rel, mask, extra):
+            return torch.sigmoid(self.logit(rel, mask, extra))
+
+        def logit(self, rel, mask, extra):
+            """The pre-sigmoid output z, s = sigmoid(z) (training watches it)."""
             neg = ~mask[:, :, None]
             net = self.pos(rel)
             for k in range(self.config["blocks"]):
@@ -206,10 +229,11 @@ def _torch_module_class():
                     net = torch.cat([net, pooled[:, None].expand_as(net)], dim=2)
                 net = getattr(self, f"block{k}")(net)
             pooled = net.masked_fill(neg, float("-inf")).max(dim=1).values
+            extra = (extra - self.extra_mean) * self.extra_scale
             z = torch.cat([self.code(torch.relu(pooled)), extra], dim=1)
             for k in range(len(self.config["mlp"])):
                 z = torch.relu(getattr(self, f"mlp{k}")(z))
-            return torch.sigmoid(self.out(z)[:, 0])
+            return self.out(z)[:, 0]
 
     return RadiusSelector
 

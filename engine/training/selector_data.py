@@ -1,5 +1,6 @@
 """Training data for the radius selector: per-query parent-patch features and the frozen
-backbone's UDF error at each candidate radius, cached on disk one file per shape (resumable).
+backbone's UDF error at each candidate radius (the errors cached on disk one file per shape,
+resumable).
 
 Shapes come from the benchmark's *training* seeds (disjoint from its test seeds by
 construction). Each shape is scanned under one of the clean / sparse / noisy conditions (chosen
@@ -50,12 +51,17 @@ def backbone_udf(predict: Predictor, tree, points: np.ndarray, queries: np.ndarr
     return values
 
 
+def condition_of(seed: int) -> int:
+    """Index in TRAINING_CONDITIONS of the condition a training shape is scanned under."""
+    return seed % len(TRAINING_CONDITIONS)
+
+
 def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[str, np.ndarray]:
     """One training shape scanned and framed as at inference, with queries and exact UDF."""
     from scipy.spatial import cKDTree
 
     gt = make_shape(domain, seed)
-    condition = TRAINING_CONDITIONS[seed % len(TRAINING_CONDITIONS)]
+    condition = TRAINING_CONDITIONS[condition_of(seed)]
     cloud = make_input(gt, domain, condition, seed)
     frame = UnitFrame.from_points(cloud.points)
     points = frame.to_unit(cloud.points)
@@ -68,21 +74,29 @@ def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[s
 
 def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent_radius: float,
                 cache_dir: Path, query_seed: int = 0) -> Dict[str, np.ndarray]:
-    """Selector inputs and error curves for one shape; read from ``cache_dir`` when present."""
+    """Selector inputs and error curves for one shape.
+
+    The error curves (the backbone run seven times: the costly part) are read from
+    ``cache_dir`` when present and written there otherwise; the selector's inputs are computed
+    afresh from the regenerated scene, so a change of features needs no new error curves.
+
+    Returns ``rel``, ``mask``, ``extra`` (:func:`engine.selector.parent_features`), ``errors``
+    (Q, K), ``udf`` (Q,) and ``queries`` (Q, 3, unit frame).
+    """
+    scene = shape_scene(domain, seed, queries, query_seed)
     path = Path(cache_dir) / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}.npz"
     if path.exists():
         with np.load(path) as data:
-            return {k: data[k] for k in data.files}
-    scene = shape_scene(domain, seed, queries, query_seed)
-    errors = np.stack([np.abs(backbone_udf(predict, scene["tree"], scene["points"],
-                                           scene["queries"], r) - scene["udf"])
-                       for r in CANDIDATE_RADII], axis=1)
+            errors = data["errors"]
+    else:
+        errors = np.stack([np.abs(backbone_udf(predict, scene["tree"], scene["points"],
+                                               scene["queries"], r) - scene["udf"])
+                           for r in CANDIDATE_RADII], axis=1).astype(np.float32)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.stem + ".tmp.npz")
+        np.savez(tmp, errors=errors, udf=scene["udf"].astype(np.float32))
+        tmp.replace(path)
     rel, mask, extra = parent_features(scene["tree"], scene["points"], scene["queries"],
                                        parent_radius)
-    data = {"rel": rel, "mask": mask, "extra": extra, "errors": errors.astype(np.float32),
-            "udf": scene["udf"].astype(np.float32)}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.npz")
-    np.savez(tmp, **data)
-    tmp.replace(path)
-    return data
+    return {"rel": rel, "mask": mask, "extra": extra, "errors": errors,
+            "udf": scene["udf"].astype(np.float32), "queries": scene["queries"]}

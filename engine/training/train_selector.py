@@ -1,13 +1,19 @@
 """Train the radius selector against the frozen backbone and export ``engine/weights/selector.npz``.
 
     python -m engine.training.train_selector --out engine/weights/selector.npz --seed 0
-        [--shapes 40] [--queries 3000] [--epochs 12] [--cache-dir out/selector_cache]
+        [--shapes 40] [--queries 3000] [--epochs 10] [--head-epochs 5]
+        [--cache-dir out/selector_cache]
 
 1. Error curves: for ``--shapes`` car and garment *training* shapes each (benchmark train seeds,
    disjoint from the test seeds), ``--queries`` band queries per shape, the backbone's absolute
    UDF error at the K = 7 candidate radii 0.012 ... 0.024 (cached per shape, resumable).
-2. Targets: the parabola vertex through each curve's minimum (:mod:`.radius_targets`), loss
-   weight w = max(e) - min(e); loss w * |r_hat - r*| / (r_max - r_min).
+2. Targets: each query's curve averaged over its ``--expected-over`` nearest queries of the same
+   shape (the expected error there), the parabola vertex through that curve's minimum
+   (:mod:`.radius_targets`) kept ``--target-inset`` of the span off the range's ends, loss
+   weight w = max(e) - min(e); loss w * |r_hat - r*| / (r_max - r_min), plus a hinge on the
+   output logit 2 beyond the targets' largest (zero in use; it pulls outputs back out of the
+   sigmoid's flat ends). The first ``--head-epochs`` train the head only, from the standardised
+   extra features (code at 0, encoder frozen); then everything trains.
 3. Evaluation on held-out queries of held-out shapes (5 more training seeds per domain, rooms
    included although rooms are never trained on): mean absolute UDF error of every single fixed
    candidate radius, the curvature policy and the learned selector, run through the backbone at
@@ -28,11 +34,14 @@ from ..curvature import curvature_radii
 from ..field import backbone_predictor
 from ..selector import NumpySelector, build_selector_torch, predict_radii
 from ..weights_file import save_weights
-from .radius_targets import CANDIDATE_RADII, loss_weights, parabola_targets
-from .selector_data import backbone_udf, shape_cache, shape_scene
+from .radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets, loss_weights,
+                             parabola_targets)
+from .selector_data import (TRAINING_CONDITIONS, backbone_udf, condition_of, shape_cache,
+                            shape_scene)
 
 TRAIN_DOMAINS = ("cars", "garments")
 EVAL_DOMAINS = ("cars", "garments", "rooms")
+LOGIT_MARGIN = 2.0  # the penalty starts this far (in logits) beyond the targets
 HELD_OUT = 5
 
 
@@ -41,9 +50,14 @@ def load_training_set(args, predict):
     for domain in TRAIN_DOMAINS:
         for i, seed in enumerate(train_seeds(domain, args.shapes)):
             started = time.time()
-            parts.append(shape_cache(domain, seed, predict, args.queries, args.parent_radius,
-                                     Path(args.cache_dir)))
-            print(f"cache {domain} {i + 1}/{args.shapes} ({time.time() - started:.1f} s)",
+            part = shape_cache(domain, seed, predict, args.queries, args.parent_radius,
+                               Path(args.cache_dir))
+            # per shape: the nearest queries must lie on the same surface
+            part["expected"] = expected_errors(part["errors"], part["queries"],
+                                               args.expected_over)
+            part["condition"] = np.full(len(part["errors"]), condition_of(seed))
+            parts.append(part)
+            print(f"shape {domain} {i + 1}/{args.shapes} ({time.time() - started:.1f} s)",
                   flush=True)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
@@ -53,31 +67,57 @@ def train(args, data):
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
-    targets = torch.from_numpy(parabola_targets(data["errors"]).astype(np.float32))
-    weights = torch.from_numpy(loss_weights(data["errors"]).astype(np.float32))
+    r_min, r_max = args.rho_min * args.parent_radius, args.rho_max * args.parent_radius
+    targets = inset_targets(parabola_targets(data["expected"]), r_min, r_max, args.target_inset)
+    share = np.clip((targets - r_min) / (r_max - r_min), 1e-3, 1 - 1e-3)
+    z_max = float(np.abs(np.log(share / (1 - share))).max()) + LOGIT_MARGIN
+    targets = torch.from_numpy(targets.astype(np.float32))
+    weights = torch.from_numpy(loss_weights(data["expected"]).astype(np.float32))
     weights = weights / weights.mean()  # scale-free: keeps the learning rate meaningful
     rel, mask, extra = (torch.from_numpy(data[k]) for k in ("rel", "mask", "extra"))
-    r_min, r_max = args.rho_min * args.parent_radius, args.rho_max * args.parent_radius
+    condition = torch.from_numpy(data["condition"])
     model = build_selector_torch()
+    model.standardise_extra(extra)
     optimiser = torch.optim.Adam(model.parameters(), lr=args.lr)
     steps_per_epoch = len(targets) // args.batch
-    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, args.lr,
-                                                   total_steps=args.epochs * steps_per_epoch)
+    # no warm-up: its peak learning rate is where outputs overshoot into the sigmoid's flat end
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser,
+                                                          args.epochs * steps_per_epoch)
     generator = torch.Generator().manual_seed(args.seed)
+    # The head learns first, from the extra features alone (the code starts at zero, the encoder
+    # frozen): trained together from the start, the 256 code columns drown the 9 features and
+    # the selector answers one radius for every query (SELECTOR_CARD.md).
+    encoder = [p for name, p in model.named_parameters() if not name.startswith(("mlp", "out"))]
+    if args.head_epochs:
+        with torch.no_grad():
+            model.code.weight.zero_()
+            model.code.bias.zero_()
     for epoch in range(args.epochs):
+        for p in encoder:
+            p.requires_grad_(epoch >= args.head_epochs)
         order = torch.randperm(len(targets), generator=generator)
         total = 0.0
+        radius_sum = torch.zeros(len(TRAINING_CONDITIONS), dtype=torch.float64)
+        radius_count = torch.zeros(len(TRAINING_CONDITIONS), dtype=torch.float64)
         for step in range(steps_per_epoch):
             batch = order[step * args.batch:(step + 1) * args.batch]
-            s = model(rel[batch], mask[batch], extra[batch])
-            r_hat = r_min + (r_max - r_min) * s
+            z = model.logit(rel[batch], mask[batch], extra[batch])
+            r_hat = r_min + (r_max - r_min) * torch.sigmoid(z)
             loss = torch.mean(weights[batch] * torch.abs(r_hat - targets[batch])) / (r_max - r_min)
+            # zero unless an output is well past every target, in the sigmoid's flat ends (where
+            # the L1 term's gradient vanishes); pulls such outputs back
+            loss = loss + torch.mean(torch.relu(z.abs() - z_max))
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
             schedule.step()
             total += loss.item()
-        print(f"epoch {epoch + 1}/{args.epochs} loss {total / steps_per_epoch:.5f}", flush=True)
+            radius_sum.index_add_(0, condition[batch], r_hat.detach().double())
+            radius_count.index_add_(0, condition[batch], torch.ones(len(batch), dtype=torch.float64))
+        means = " ".join(f"{name} {mean:.4f}" for name, mean in
+                         zip(TRAINING_CONDITIONS, (radius_sum / radius_count.clamp(min=1)).tolist()))
+        print(f"epoch {epoch + 1}/{args.epochs} loss {total / steps_per_epoch:.5f} "
+              f"mean r_hat: {means}", flush=True)
     return model
 
 
@@ -118,9 +158,16 @@ def main(argv=None):
     parser.add_argument("--cache-dir", default="out/selector_cache")
     parser.add_argument("--shapes", type=int, default=40, help="training shapes per domain")
     parser.add_argument("--queries", type=int, default=3000, help="queries per shape")
-    parser.add_argument("--epochs", type=int, default=12)
+    parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--batch", type=int, default=512)
-    parser.add_argument("--lr", type=float, default=2e-3)
+    parser.add_argument("--lr", type=float, default=3e-3)
+    parser.add_argument("--head-epochs", type=int, default=5,
+                        help="first epochs that train only the head (encoder frozen, code at 0)")
+    parser.add_argument("--expected-over", type=int, default=64,
+                        help="nearest queries whose error curves are averaged into a target's "
+                             "(1: the paper's per-query curves)")
+    parser.add_argument("--target-inset", type=float, default=0.005,
+                        help="share of the radius span that targets keep off its ends")
     parser.add_argument("--parent-radius", type=float, default=0.024)
     parser.add_argument("--rho-min", type=float, default=0.5)
     parser.add_argument("--rho-max", type=float, default=1.0)

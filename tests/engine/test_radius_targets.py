@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from engine.training.radius_targets import (CANDIDATE_RADII, loss_weights, parabola_targets,
-                                            selector_loss)
+from engine.training.radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets,
+                                            loss_weights, parabola_targets, selector_loss)
 
 
 def test_candidate_radii_are_the_papers_seven():
@@ -50,3 +50,33 @@ def test_loss_weight_is_zero_where_the_error_curve_is_flat():
 def test_selector_loss_is_normalised_by_the_radius_span():
     loss = selector_loss(np.array([0.018]), np.array([0.012]), np.array([2.0]), 0.012, 0.024)
     assert loss == pytest.approx(2.0 * 0.006 / 0.012)
+
+
+def test_expected_errors_average_the_nearest_queries_curves():
+    queries = np.array([[0.0, 0, 0], [0.001, 0, 0], [1.0, 0, 0], [1.001, 0, 0]])
+    errors = np.array([[1.0, 2.0], [3.0, 4.0], [10.0, 20.0], [30.0, 40.0]])
+    np.testing.assert_array_equal(expected_errors(errors, queries, 1), errors)
+    np.testing.assert_allclose(expected_errors(errors, queries, 2),
+                               [[2, 3], [2, 3], [20, 30], [20, 30]])
+    # more neighbours than queries: every curve becomes the shape's mean curve
+    np.testing.assert_allclose(expected_errors(errors, queries, 99), [[11, 16.5]] * 4)
+
+
+def test_a_curve_whose_noise_hides_its_vertex_gets_it_back_in_expectation():
+    """Per-query curves = a parabola with its vertex at 0.017 plus noise: their own targets
+    scatter over the grid, the expected curves' targets gather at the vertex."""
+    rng = np.random.default_rng(0)
+    curve = (CANDIDATE_RADII - 0.017) ** 2 * 1e3
+    errors = curve + rng.normal(0, 0.03, (2000, 7))
+    queries = rng.uniform(0, 1, (2000, 3))
+    raw = parabola_targets(errors)
+    expected = parabola_targets(expected_errors(errors, queries, 64))
+    assert np.std(raw) > 3 * np.std(expected)
+    assert abs(np.median(expected) - 0.017) < 0.0005
+
+
+def test_inset_keeps_targets_off_the_ends_of_the_range():
+    targets = np.array([0.012, 0.0125, 0.018, 0.024])
+    np.testing.assert_allclose(inset_targets(targets, 0.012, 0.024, 0.05),
+                               [0.0126, 0.0126, 0.018, 0.0234])
+    np.testing.assert_array_equal(inset_targets(targets, 0.012, 0.024, 0.0), targets)

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from engine.selector import (DEFAULT_CONFIG, NumpySelector, build_selector_torch, macs_per_query,
-                             parent_features, predict_radii)
+from engine.selector import (DEFAULT_CONFIG, EXTRA_FEATURES, HISTOGRAM_BINS, NumpySelector,
+                             build_selector_torch, macs_per_query, parent_features, predict_radii)
 
 torch = pytest.importorskip("torch")
 
@@ -14,6 +14,7 @@ def _random_selector(seed=0):
     with torch.no_grad():  # the zero-initialised residual layers would hide mistakes
         for p in module.parameters():
             p.add_(0.3 * torch.randn_like(p))
+    module.standardise_extra(torch.rand(50, EXTRA_FEATURES))  # a standardisation to apply
     params = {k: v.numpy() for k, v in module.state_dict().items()}
     return module.eval(), NumpySelector(params, module.config)
 
@@ -63,7 +64,8 @@ def test_parent_features_histogram_and_count():
     points = _cloud(4, 5000)
     rel, mask, extra = parent_features(cKDTree(points), points, points[:50], 0.024)
     assert rel.shape == (50, 32, 3) and mask.shape == (50, 32)
-    np.testing.assert_allclose(extra[:, 1:].sum(axis=1), 1.0, atol=1e-6)
+    assert extra.shape == (50, EXTRA_FEATURES)
+    np.testing.assert_allclose(extra[:, 1:1 + HISTOGRAM_BINS].sum(axis=1), 1.0, atol=1e-6)
     assert np.all(np.linalg.norm(rel[mask], axis=1) <= 1.0 + 1e-6)
 
 
@@ -87,7 +89,7 @@ def test_parent_features_match_a_brute_force_count_and_chunking(monkeypatch):
         inside = distance[distance <= 0.024][:PARENT_POINTS]
         assert extra[row, 0] == pytest.approx(np.log1p(len(inside)) / np.log1p(PARENT_POINTS))
         shells = np.minimum((inside / 0.024 * 6).astype(int), 5)
-        np.testing.assert_allclose(extra[row, 1:], np.bincount(shells, minlength=6) / len(inside),
+        np.testing.assert_allclose(extra[row, 1:7], np.bincount(shells, minlength=6) / len(inside),
                                    atol=1e-6)
         assert mask[row].sum() == len(inside[::4])
     # given lists (as the field passes them) and small chunks give the same features
@@ -108,3 +110,17 @@ def test_the_torch_selector_for_cuda_answers_as_the_numpy_one():
     torch_selector = TorchSelector(module.eval(), "cpu")
     np.testing.assert_allclose(torch_selector.predict_unit(rel, mask, extra, batch_size=150),
                                numpy_selector.predict_unit(rel, mask, extra), atol=1e-4)
+
+
+def test_roughness_features_tell_a_noisy_patch_from_a_clean_curved_one():
+    """The selector's extra columns 7-8: a curved clean sheet reads smooth, the same sheet with
+    noise of a tenth of R reads rough."""
+    clean = _cloud(7, 40000)
+    noisy = clean + np.random.default_rng(8).normal(0, 0.0024, clean.shape)
+    queries = clean[:200] + 0.003
+    rough = {}
+    for name, points in (("clean", clean), ("noisy", noisy)):
+        rough[name] = parent_features(cKDTree(points), points, queries, 0.024)[2][:, 7:]
+    assert np.median(rough["clean"][:, 1]) < 0.01
+    assert np.median(rough["noisy"][:, 1]) > 0.06
+    assert np.median(rough["noisy"][:, 0]) > 2 * np.median(rough["clean"][:, 0])
