@@ -124,3 +124,34 @@ def test_roughness_features_tell_a_noisy_patch_from_a_clean_curved_one():
     assert np.median(rough["clean"][:, 1]) < 0.01
     assert np.median(rough["noisy"][:, 1]) > 0.06
     assert np.median(rough["noisy"][:, 0]) > 2 * np.median(rough["clean"][:, 0])
+
+
+def test_training_learns_a_radius_from_the_noise_features():
+    """Two kinds of patch, told apart only by the quadric residual (a small number, as measured):
+    clean ones whose error is lowest at 0.016, noisy ones whose error falls all the way to 0.024.
+    The trainer (standardised features, head first) must give each kind its own radius."""
+    import argparse
+
+    from engine.training.radius_targets import CANDIDATE_RADII
+    from engine.training.train_selector import train
+
+    rng = np.random.default_rng(0)
+    count = 4096
+    noisy = np.arange(count) % 2 == 1
+    rel = rng.uniform(-0.7, 0.7, (count, 32, 3)).astype(np.float32)
+    mask = np.ones((count, 32), dtype=bool)
+    extra = rng.uniform(0, 0.3, (count, EXTRA_FEATURES)).astype(np.float32)
+    extra[:, -1] = np.where(noisy, 0.11, 0.03) + rng.normal(0, 0.005, count)
+    radii = np.asarray(CANDIDATE_RADII)
+    curves = np.where(noisy[:, None], 1e-4 + 0.05 * (0.024 - radii),
+                      1e-4 + 20.0 * (radii - 0.016) ** 2)
+    data = {"rel": rel, "mask": mask, "extra": extra, "expected": curves,
+            "condition": noisy.astype(np.int64)}
+    args = argparse.Namespace(seed=0, threads=1, rho_min=0.5, rho_max=1.0, parent_radius=0.024,
+                              target_inset=0.005, epochs=4, head_epochs=2, batch=256, lr=3e-3)
+    model = train(args, data).eval()
+    with torch.no_grad():
+        s = model(torch.from_numpy(rel), torch.from_numpy(mask), torch.from_numpy(extra)).numpy()
+    radius = 0.012 + 0.012 * s
+    assert abs(np.median(radius[~noisy]) - 0.016) < 0.0015
+    assert np.median(radius[noisy]) > 0.0235
