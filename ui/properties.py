@@ -18,7 +18,8 @@ RADIUS_MODE_ITEMS = (
     ("curvature", "Curvature",
      "Smaller balls where the surface bends, larger ones where it is flat"),
     ("learned", "Learned",
-     "A small network picks the ball size for each spot from the points around it"),
+     "A small network picks the ball size for each spot from the points around it: smaller "
+     "where the scan looks clean, larger where it looks noisy or sparse"),
 )
 
 OUTLIER_ITEMS = (
