@@ -2,9 +2,9 @@
 
 One row per domain × condition; each row's full result (per-shape metrics, timings, memory) is
 written as JSON to ``--out`` (``<method>_<domain>_<condition>.json``). ``--table`` runs every
-radius mode of ``ours`` instead and prints Table I (rows fixed, curvature, learned; per domain
-CD-L1 ×10², F1@0.005, F1@0.01, NC), one table per condition; a mode the engine has not built yet
-is reported as 'not available'.
+radius mode of ``ours`` instead and prints Table I (rows fixed, curvature, learned, and a
+reference method's row, Open3D Poisson by default; per domain CD-L1 ×10², F1@0.005, F1@0.01, NC),
+one table per condition; a mode the engine has not built yet is reported as 'not available'.
 
 Examples::
 
@@ -21,6 +21,7 @@ import sys
 CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
 DOMAIN_NAMES = ("cars", "garments", "rooms")
 TABLE_MODES = ("fixed", "curvature", "learned")
+REFERENCE_LABEL = "{method} (reference)"
 
 
 def add_arguments(parser) -> None:
@@ -49,6 +50,9 @@ def add_arguments(parser) -> None:
                         help="folder for the JSON results (default bench_results)")
     parser.add_argument("--table", action="store_true",
                         help="run each radius mode of ours and print Table I")
+    parser.add_argument("--reference", default="poisson",
+                        help="with --table: the method whose row is printed under the radius "
+                             "modes, run on the same shapes (default poisson; none for no row)")
     parser.add_argument("--report", action="store_true",
                         help="run nothing: print the table (with --table, Table I) of the JSON results "
                              "already in --out")
@@ -105,6 +109,9 @@ def run(args) -> int:
     conditions = _selected(args.condition, CONDITION_NAMES)
     progress = _progress(args.quiet)
 
+    if args.table and args.reference != "none" and args.reference not in METHODS:
+        raise InputError(f"unknown --reference {args.reference!r}; known: "
+                         f"{', '.join(METHODS)}, none")
     if args.table:
         return _run_table(args, domains, conditions, progress)
     if args.report:
@@ -181,36 +188,46 @@ def _load_result(args, method: str, domain: str, condition: str):
     return first_shapes(read_json(path), args.count)
 
 
+def _table_rows(args):
+    """Table I's rows: (label, method name, radius mode) for each radius mode of ``ours``, then
+    the reference method's row (``--reference``) unless it is ``none``."""
+    rows = [(mode, "ours", mode) for mode in TABLE_MODES]
+    if args.reference != "none":
+        rows.append((REFERENCE_LABEL.format(method=args.reference), args.reference, None))
+    return rows
+
+
 def _run_table(args, domains, conditions, progress) -> int:
-    """Table I: one row per radius mode of ``ours``, columns per domain. With ``--report`` the
-    table is assembled from the JSON results already in ``--out`` (runs done one at a time)."""
+    """Table I: one row per radius mode of ``ours`` (and the reference method), columns per
+    domain. With ``--report`` the table is assembled from the JSON results already in ``--out``
+    (runs done one at a time)."""
     from ..bench.harness import first_shapes, run_benchmark, write_json
-    from ..bench.methods import MethodUnavailable
+    from ..bench.methods import MethodUnavailable, ours_name
 
     for condition in conditions:
         cells = {}
-        for mode in TABLE_MODES:
+        for label, method_name, mode in _table_rows(args):
             if args.report:
-                name = "ours" if mode == "fixed" else f"ours-{mode}"
+                name = ours_name(mode, None) if method_name == "ours" else method_name
                 found = {d: _load_result(args, name, d, condition) for d in domains}
                 missing = [d for d, r in found.items() if r is None]
-                cells[mode] = (f"not run ({', '.join(missing)}: no result with {args.count} "
-                               f"shapes in {args.out})" if missing else found)
+                cells[label] = (f"not run ({', '.join(missing)}: no result with {args.count} "
+                                f"shapes in {args.out})" if missing else found)
                 continue
-            factory = _factory(args, "ours", mode)
+            factory = _factory(args, method_name, mode)
             try:
                 method = factory()
             except MethodUnavailable as error:
-                cells[mode] = f"not available ({error})"
+                cells[label] = f"not available ({error})"
                 continue
-            cells[mode] = {}
+            cells[label] = {}
             for domain in domains:
                 result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
                                        samples=args.samples, progress=progress, jobs=args.jobs,
                                        method_factory=factory, earlier=_earlier(
                                            args, method.__name__, domain, condition))
                 print(f"wrote {write_json(result, args.out)}", file=sys.stderr)
-                cells[mode][domain] = first_shapes(result, args.count)  # --resume may keep more
+                cells[label][domain] = first_shapes(result, args.count)  # --resume may keep more
         print(format_table_one(cells, domains, condition, args.count, args.samples))
         print()
     return 0

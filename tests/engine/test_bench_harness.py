@@ -261,10 +261,17 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     real_run_shape = harness._run_shape
     monkeypatch.setattr(harness, "_default_dataset", lambda: dataset)
     monkeypatch.setitem(methods.METHODS, "ours", fake_ours)
+
+    def no_poisson(**options):
+        raise methods.MethodUnavailable("no open3d")
+
+    monkeypatch.setitem(methods.METHODS, "poisson", no_poisson)
     code = main(["bench", "--table", "--domain", "cars", "--condition", "clean", "--count", "1",
                  "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
     assert code == 0
     lines = capsys.readouterr().out.splitlines()
+    assert any(line.startswith("| poisson (reference) | not available (no open3d)")
+               for line in lines)
     assert any(line.startswith("| fixed | ") for line in lines)
     assert any(line.startswith("| curvature | ") for line in lines)
     assert any(line.startswith("| learned | not available (no selector weights)") for line in lines)
@@ -298,6 +305,29 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     assert "Table I (clean, 2 shapes per domain" in capsys.readouterr().out
     saved = json.loads((tmp_path / "ours_cars_clean.json").read_text())
     assert [row["shape_seed"] for row in saved["shapes"]] == [0, 1]
+
+
+def test_table_reference_row_comes_from_the_reference_methods_results(capsys, tmp_path):
+    from engine.__main__ import main
+
+    ours = run(lambda cloud: sphere(2), name="ours")
+    poisson = run(lambda cloud: sphere(1), name="poisson")
+    write_json(ours, str(tmp_path))
+    write_json(poisson, str(tmp_path))
+    args = ["bench", "--table", "--report", "--domain", "cars", "--condition", "clean",
+            "--count", "2", "--samples", str(SAMPLES), "--out", str(tmp_path)]
+    assert main(args) == 0
+    rows = {line.split(" | ")[0]: line for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| ")}
+    for label, result in (("| fixed", ours), ("| poisson (reference)", poisson)):
+        cd = float(rows[label].split(" | ")[1])
+        assert cd == pytest.approx(result["summary"]["cd_l1_x100"], abs=5e-4)
+    assert ours["summary"]["cd_l1_x100"] != pytest.approx(poisson["summary"]["cd_l1_x100"],
+                                                          abs=1e-3)
+    assert main(args + ["--reference", "none"]) == 0
+    assert "(reference)" not in capsys.readouterr().out
+    assert main(args + ["--reference", "marching-ants"]) == 2
+    assert "unknown --reference 'marching-ants'" in capsys.readouterr().err
 
 
 def test_first_shapes_recomputes_the_summary():
