@@ -8,7 +8,7 @@ random streams (``default_rng([seed, k])``), so e.g. the noisy input is the clea
 
 import os
 from dataclasses import dataclass
-from typing import Dict, List, Tuple
+from typing import Dict, List, Tuple, Union
 
 import numpy as np
 
@@ -113,8 +113,10 @@ def room_viewpoints(seed: int) -> np.ndarray:
     return (layout.viewpoints - size / 2) / size.max()
 
 
-def make_input(gt: Mesh, domain: str, condition: str, seed: int) -> PointCloud:
-    """The input cloud for ``gt`` (from ``make_shape(domain, seed)``) under ``condition``.
+def make_input(gt: Mesh, domain: str, condition: Union[str, ScanCondition],
+               seed: int) -> PointCloud:
+    """The input cloud for ``gt`` (from ``make_shape(domain, seed)``) under ``condition`` (a name
+    in ``CONDITIONS`` or a condition of one's own, e.g. the selector's dense training scans).
 
     Cars and garments: ``count`` area-uniform samples. Rooms: a virtual scan from the room's
     2-4 scanner positions (density falls off with distance, occluded parts are missing). Then
@@ -127,7 +129,7 @@ def make_input(gt: Mesh, domain: str, condition: str, seed: int) -> PointCloud:
         face each point was sampled on (before noise; meaningless for outliers).
     """
     _check_domain(domain)
-    spec = CONDITIONS[condition]
+    spec = condition if isinstance(condition, ScanCondition) else CONDITIONS[condition]
     if domain == "rooms":
         rng = np.random.default_rng([seed, _STREAM_SCAN])
         points, normals = virtual_scan(gt, spec.count, rng, viewpoints=room_viewpoints(seed))

@@ -4,18 +4,22 @@ resumable).
 
 Shapes come from the benchmark's *training* seeds (disjoint from its test seeds by
 construction). Each shape is scanned under one of the clean / sparse / noisy conditions (chosen
-by its seed), so the selector sees the densities and noise where the radius matters most.
+by its seed), so the selector sees the densities and noise where the radius matters most; a few
+more are scanned densely (``dense_conditions``), clean or noisy, because a virtual room scan
+is that dense near its scanner and a selector that never saw a dense noisy patch reads one as
+clean (engine/weights/SELECTOR_CARD.md).
 Queries are drawn uniformly within ``QUERY_BAND`` of random input points: the grid nodes where
 the field calls the network (``NETWORK_BAND_NODES`` spacings at the default resolution 256).
 Farther nodes keep the nearest-point distance whatever the radius, so they teach nothing.
 """
 
+from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Dict
+from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
-from ..bench.dataset import make_input, make_shape
+from ..bench.dataset import CONDITIONS, ScanCondition, make_input, make_shape
 from ..field import NETWORK_BAND_NODES, predict_trimmed
 from ..frame import UnitFrame
 from ..patches import MAX_POINTS, gather_patches
@@ -25,6 +29,7 @@ from .mesh_distance import point_mesh_distance
 from .radius_targets import CANDIDATE_RADII
 
 TRAINING_CONDITIONS = ("clean", "sparse", "noisy")
+DENSE_POINTS = 150_000  # 3x the benchmark's clean and noisy scans
 QUERY_BAND = NETWORK_BAND_NODES / ReconstructSettings().resolution
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -51,17 +56,26 @@ def backbone_udf(predict: Predictor, tree, points: np.ndarray, queries: np.ndarr
     return values
 
 
+def dense_conditions(points: int = DENSE_POINTS) -> Tuple[ScanCondition, ScanCondition]:
+    """The clean and the noisy scan condition with ``points`` points instead of 50 000."""
+    return tuple(replace(CONDITIONS[name], name=f"dense-{name}", count=points)
+                 for name in ("clean", "noisy"))
+
+
 def condition_of(seed: int) -> int:
     """Index in TRAINING_CONDITIONS of the condition a training shape is scanned under."""
     return seed % len(TRAINING_CONDITIONS)
 
 
-def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[str, np.ndarray]:
-    """One training shape scanned and framed as at inference, with queries and exact UDF."""
+def shape_scene(domain: str, seed: int, queries: int, query_seed: int,
+                condition: Optional[ScanCondition] = None) -> Dict[str, np.ndarray]:
+    """One training shape scanned and framed as at inference, with queries and exact UDF.
+
+    Scanned under ``condition``, or by default the training condition its seed picks."""
     from scipy.spatial import cKDTree
 
     gt = make_shape(domain, seed)
-    condition = TRAINING_CONDITIONS[condition_of(seed)]
+    condition = condition or CONDITIONS[TRAINING_CONDITIONS[condition_of(seed)]]
     cloud = make_input(gt, domain, condition, seed)
     frame = UnitFrame.from_points(cloud.points)
     points = frame.to_unit(cloud.points)
@@ -69,12 +83,13 @@ def shape_scene(domain: str, seed: int, queries: int, query_seed: int) -> Dict[s
     q = band_queries(points, queries, QUERY_BAND, rng)
     udf = point_mesh_distance(frame.to_unit(gt.vertices), gt.faces, q, rng)
     return {"points": points, "queries": q, "udf": udf, "tree": cKDTree(points),
-            "condition": condition}
+            "condition": condition.name}
 
 
 def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent_radius: float,
-                cache_dir: Path, query_seed: int = 0) -> Dict[str, np.ndarray]:
-    """Selector inputs and error curves for one shape.
+                cache_dir: Path, query_seed: int = 0,
+                condition: Optional[ScanCondition] = None) -> Dict[str, np.ndarray]:
+    """Selector inputs and error curves for one shape (scanned as :func:`shape_scene` says).
 
     The error curves (the backbone run seven times: the costly part) are read from
     ``cache_dir`` when present and written there otherwise; the selector's inputs are computed
@@ -83,8 +98,10 @@ def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent
     Returns ``rel``, ``mask``, ``extra`` (:func:`engine.selector.parent_features`), ``errors``
     (Q, K), ``udf`` (Q,) and ``queries`` (Q, 3, unit frame).
     """
-    scene = shape_scene(domain, seed, queries, query_seed)
-    path = Path(cache_dir) / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}.npz"
+    scene = shape_scene(domain, seed, queries, query_seed, condition)
+    scan = "" if condition is None else f"_{condition.name}{condition.count}"
+    path = (Path(cache_dir)
+            / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}{scan}.npz")
     if path.exists():
         with np.load(path) as data:
             errors = data["errors"]

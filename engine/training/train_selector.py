@@ -1,11 +1,12 @@
 """Train the radius selector against the frozen backbone and export ``engine/weights/selector.npz``.
 
     python -m engine.training.train_selector --out engine/weights/selector.npz --seed 0
-        [--shapes 40] [--queries 3000] [--epochs 10] [--head-epochs 5]
+        [--shapes 40] [--dense-shapes 10] [--queries 3000] [--epochs 10] [--head-epochs 5]
         [--cache-dir out/selector_cache]
 
 1. Error curves: for ``--shapes`` car and garment *training* shapes each (benchmark train seeds,
-   disjoint from the test seeds), ``--queries`` band queries per shape, the backbone's absolute
+   disjoint from the test seeds), and ``--dense-shapes`` more each scanned with
+   ``--dense-points`` points, ``--queries`` band queries per shape, the backbone's absolute
    UDF error at the K = 7 candidate radii 0.012 ... 0.024 (cached per shape, resumable).
 2. Targets: each query's curve averaged over its ``--expected-over`` nearest queries of the same
    shape (the expected error there), the parabola vertex through that curve's minimum
@@ -36,8 +37,8 @@ from ..selector import NumpySelector, build_selector_torch, predict_radii
 from ..weights_file import save_weights
 from .radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets, loss_weights,
                              parabola_targets)
-from .selector_data import (TRAINING_CONDITIONS, backbone_udf, condition_of, shape_cache,
-                            shape_scene)
+from .selector_data import (DENSE_POINTS, TRAINING_CONDITIONS, backbone_udf, condition_of,
+                            dense_conditions, shape_cache, shape_scene)
 
 TRAIN_DOMAINS = ("cars", "garments")
 EVAL_DOMAINS = ("cars", "garments", "rooms")
@@ -45,20 +46,35 @@ LOGIT_MARGIN = 2.0  # the penalty starts this far (in logits) beyond the targets
 HELD_OUT = 5
 
 
+def training_shapes(args):
+    """(domain, seed, scan condition or None for the seed's own, TRAINING_CONDITIONS index) of
+    every training shape: ``--shapes`` per domain, then ``--dense-shapes`` per domain scanned
+    densely, clean and noisy in turn (seeds past the held-out ones; counted as clean or noisy
+    in the progress lines)."""
+    for domain in TRAIN_DOMAINS:
+        for seed in train_seeds(domain, args.shapes):
+            yield domain, seed, None, condition_of(seed)
+    dense = dense_conditions(args.dense_points)
+    first = args.shapes + HELD_OUT
+    for domain in TRAIN_DOMAINS:
+        for i, seed in enumerate(train_seeds(domain, first + args.dense_shapes)[first:]):
+            yield domain, seed, dense[i % 2], TRAINING_CONDITIONS.index(("clean", "noisy")[i % 2])
+
+
 def load_training_set(args, predict):
     parts = []
-    for domain in TRAIN_DOMAINS:
-        for i, seed in enumerate(train_seeds(domain, args.shapes)):
-            started = time.time()
-            part = shape_cache(domain, seed, predict, args.queries, args.parent_radius,
-                               Path(args.cache_dir))
-            # per shape: the nearest queries must lie on the same surface
-            part["expected"] = expected_errors(part["errors"], part["queries"],
-                                               args.expected_over)
-            part["condition"] = np.full(len(part["errors"]), condition_of(seed))
-            parts.append(part)
-            print(f"shape {domain} {i + 1}/{args.shapes} ({time.time() - started:.1f} s)",
-                  flush=True)
+    shapes = list(training_shapes(args))
+    for i, (domain, seed, condition, label) in enumerate(shapes):
+        started = time.time()
+        part = shape_cache(domain, seed, predict, args.queries, args.parent_radius,
+                           Path(args.cache_dir), condition=condition)
+        # per shape: the nearest queries must lie on the same surface
+        part["expected"] = expected_errors(part["errors"], part["queries"], args.expected_over)
+        part["condition"] = np.full(len(part["errors"]), label)
+        parts.append(part)
+        print(f"shape {i + 1}/{len(shapes)}: {domain} {seed} "
+              f"{condition.name if condition else TRAINING_CONDITIONS[label]} "
+              f"({time.time() - started:.1f} s)", flush=True)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -157,6 +173,10 @@ def main(argv=None):
     parser.add_argument("--out", default="engine/weights/selector.npz")
     parser.add_argument("--cache-dir", default="out/selector_cache")
     parser.add_argument("--shapes", type=int, default=40, help="training shapes per domain")
+    parser.add_argument("--dense-shapes", type=int, default=10,
+                        help="more training shapes per domain, scanned densely (clean, noisy)")
+    parser.add_argument("--dense-points", type=int, default=DENSE_POINTS,
+                        help="points in a dense training scan")
     parser.add_argument("--queries", type=int, default=3000, help="queries per shape")
     parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--batch", type=int, default=512)

@@ -1,6 +1,7 @@
 """The benchmark's procedural shapes, virtual scanner and scan conditions."""
 
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -165,6 +166,16 @@ def test_noise_and_outliers_match_their_conditions(domain):
     assert abs(moved.mean() - 0.10) < 0.002
     assert np.abs(outliers).max() <= 0.52
     assert len(make_input(gt, domain, "sparse", seed)) == 10_000
+
+
+def test_make_input_takes_a_condition_of_ones_own():
+    seed = held_out_seeds("garments")[2]
+    gt = make_shape("garments", seed)
+    dense = replace(CONDITIONS["noisy"], name="dense-noisy", count=80_000)
+    points = make_input(gt, "garments", dense, seed).points
+    clean = make_input(gt, "garments", replace(dense, noise_sigma=0.0), seed).points
+    assert len(points) == 80_000
+    assert abs(np.std(points - clean) - 0.0025) < 0.0001
 
 
 @pytest.mark.skipif(not os.path.isdir(os.path.join(dataset.shared_dir(), "data", "real")),

@@ -155,3 +155,20 @@ def test_training_learns_a_radius_from_the_noise_features():
     radius = 0.012 + 0.012 * s
     assert abs(np.median(radius[~noisy]) - 0.016) < 0.0015
     assert np.median(radius[noisy]) > 0.0235
+
+
+def test_dense_training_scans_are_cached_apart_and_fill_the_parent_balls(tmp_path):
+    from engine.bench.dataset import train_seeds
+    from engine.training.selector_data import dense_conditions, shape_cache
+
+    def zeros(rel, mask):  # a stand-in backbone: the error curves are then |udf|
+        return np.zeros(len(rel), dtype=np.float32)
+
+    seed = train_seeds("cars", 46)[45]
+    own = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path)
+    dense = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path,
+                        condition=dense_conditions(150_000)[0])
+    assert len(list(tmp_path.glob("*.npz"))) == 2  # one file per scan: no stale curves
+    assert own["errors"].shape == dense["errors"].shape == (200, 7)
+    # log(1 + N) / log(129): 3x the points in every parent ball, up to the 128 it reads
+    assert np.median(dense["extra"][:, 0]) > np.median(own["extra"][:, 0]) + 0.1
