@@ -15,7 +15,7 @@ Farther nodes keep the nearest-point distance whatever the radius, so they teach
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, Optional
 
 import numpy as np
 
@@ -56,10 +56,10 @@ def backbone_udf(predict: Predictor, tree, points: np.ndarray, queries: np.ndarr
     return values
 
 
-def dense_conditions(points: int = DENSE_POINTS) -> Tuple[ScanCondition, ScanCondition]:
-    """The clean and the noisy scan condition with ``points`` points instead of 50 000."""
-    return tuple(replace(CONDITIONS[name], name=f"dense-{name}", count=points)
-                 for name in ("clean", "noisy"))
+def dense_conditions(points: int = DENSE_POINTS) -> Dict[str, ScanCondition]:
+    """The clean and the noisy scan condition, by name, with ``points`` points instead of 50 000."""
+    return {name: replace(CONDITIONS[name], name=f"dense-{name}", count=points)
+            for name in ("clean", "noisy")}
 
 
 def condition_of(seed: int) -> int:

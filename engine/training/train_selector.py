@@ -58,7 +58,8 @@ def training_shapes(args):
     first = args.shapes + HELD_OUT
     for domain in TRAIN_DOMAINS:
         for i, seed in enumerate(train_seeds(domain, first + args.dense_shapes)[first:]):
-            yield domain, seed, dense[i % 2], TRAINING_CONDITIONS.index(("clean", "noisy")[i % 2])
+            name = ("clean", "noisy")[i % 2]
+            yield domain, seed, dense[name], TRAINING_CONDITIONS.index(name)
 
 
 def load_training_set(args, predict):

@@ -167,7 +167,7 @@ def test_dense_training_scans_are_cached_apart_and_fill_the_parent_balls(tmp_pat
     seed = train_seeds("cars", 46)[45]
     own = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path)
     dense = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path,
-                        condition=dense_conditions(150_000)[0])
+                        condition=dense_conditions(150_000)["clean"])
     assert len(list(tmp_path.glob("*.npz"))) == 2  # one file per scan: no stale curves
     assert own["errors"].shape == dense["errors"].shape == (200, 7)
     # log(1 + N) / log(129): 3x the points in every parent ball, up to the 128 it reads
