@@ -234,7 +234,9 @@ def _run_table(args, domains, conditions, progress) -> int:
 
 
 def format_table_one(cells: dict, domains, condition: str, count: int, samples: int) -> str:
-    """Table I as markdown: rows = radius modes, 4 metric columns per domain.
+    """Table I as markdown: rows = radius modes, 4 metric columns per domain. In each metric
+    column the best value as printed (lowest CD, highest F-score and NC) is bold, in every row
+    that reaches it, unless all rows print the same value.
 
     Parameters
     ----------
@@ -250,6 +252,15 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
     rule = "|---|" + "---|" * (4 * len(domains) + 1)
     lines = [f"Table I ({condition}, {count} shapes per domain, {samples} samples per mesh)",
              "", head, rule]
+    scored = {mode: cell for mode, cell in cells.items() if not isinstance(cell, str)}
+    best = {}
+    for domain in domains:
+        for key, digits in keys:
+            printed = {_fmt(cell[domain]["summary"][key], digits) for cell in scored.values()}
+            numbers = [float(text) for text in printed if text not in ("–", "inf")]
+            if len(printed) > 1 and numbers:
+                best[domain, key] = _fmt(min(numbers) if key == "cd_l1_x100" else max(numbers),
+                                         digits)
     for mode, cell in cells.items():
         if isinstance(cell, str):
             lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (4 * len(domains)))
@@ -262,6 +273,8 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
             failed = summary["empty"]
             for key, digits in keys:
                 text = _fmt(summary[key], digits)
+                if best.get((domain, key)) == text:
+                    text = f"**{text}**"
                 if key == "cd_l1_x100" and failed:
                     text += f" ({failed} failed)"
                 values.append(text)

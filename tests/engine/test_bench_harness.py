@@ -220,6 +220,25 @@ def test_table_one_reports_missing_modes():
     assert lines[4].startswith("| fixed | ") and lines[5].startswith("| learned | not available")
 
 
+def test_table_one_bolds_the_best_value_of_each_column():
+    from engine.commands.bench import format_table_one
+
+    def result(cd, f1, nc):
+        summary = {"cd_l1_x100": cd, "f1_0.005": f1, "f1_0.01": 1.0, "nc": nc, "empty": 0,
+                   "seconds": 1.0}
+        return {"summary": summary}
+
+    cells = {"fixed": {"cars": result(0.30, 0.90, 0.95)},
+             "learned": {"cars": result(0.25, 0.90, 0.96)},
+             "poisson (reference)": {"cars": result(0.40, 0.80, 0.9604)}}
+    rows = format_table_one(cells, ["cars"], "clean", 1, SAMPLES).splitlines()[4:]
+    # lowest CD; highest F1 (a tie, both bold); F1@0.01 equal everywhere (none bold); highest NC
+    # as printed (0.960 twice)
+    assert rows[0] == "| fixed | 0.300 | **0.900** | 1.000 | 0.950 | 1.0 |"
+    assert rows[1] == "| learned | **0.250** | **0.900** | 1.000 | **0.960** | 1.0 |"
+    assert rows[2] == "| poisson (reference) | 0.400 | 0.800 | 1.000 | **0.960** | 1.0 |"
+
+
 def test_real_dataset_smoke():
     dataset = pytest.importorskip("engine.bench.dataset")
     gt = dataset.make_shape("garments", dataset.test_seeds("garments", 1)[0])
@@ -320,7 +339,7 @@ def test_table_reference_row_comes_from_the_reference_methods_results(capsys, tm
     rows = {line.split(" | ")[0]: line for line in capsys.readouterr().out.splitlines()
             if line.startswith("| ")}
     for label, result in (("| fixed", ours), ("| poisson (reference)", poisson)):
-        cd = float(rows[label].split(" | ")[1])
+        cd = float(rows[label].split(" | ")[1].strip("*"))
         assert cd == pytest.approx(result["summary"]["cd_l1_x100"], abs=5e-4)
     assert ours["summary"]["cd_l1_x100"] != pytest.approx(poisson["summary"]["cd_l1_x100"],
                                                           abs=1e-3)
