@@ -252,11 +252,11 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
     rule = "|---|" + "---|" * (4 * len(domains) + 1)
     lines = [f"Table I ({condition}, {count} shapes per domain, {samples} samples per mesh)",
              "", head, rule]
-    scored = {mode: cell for mode, cell in cells.items() if not isinstance(cell, str)}
+    scored = [cell for cell in cells.values() if not isinstance(cell, str)]
     best = {}
     for domain in domains:
         for key, digits in keys:
-            printed = {_fmt(cell[domain]["summary"][key], digits) for cell in scored.values()}
+            printed = {_fmt(cell[domain]["summary"][key], digits) for cell in scored}
             numbers = [float(text) for text in printed if text not in ("–", "inf")]
             if len(printed) > 1 and numbers:
                 best[domain, key] = _fmt(min(numbers) if key == "cd_l1_x100" else max(numbers),
