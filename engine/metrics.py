@@ -10,6 +10,11 @@ face normals, and nearest neighbours are found in both directions with a k-d tre
   gt sample and R the share of gt samples within t of a pred sample (0 when P + R = 0).
 * ``nc``: normal consistency, the mean |dot| of each sample's normal with its nearest neighbour's
   normal, averaged over both directions (orientation-agnostic).
+* ``double_layer`` / ``gt_double_layer``: the double-layered share of the prediction's (ground
+  truth's) area, see :func:`double_layer_share`. CD, F1 and NC cannot see a second sheet lying on
+  the first; this can. The ground truth's own share comes from its thin parts.
+* ``area_ratio``: prediction area / ground-truth area (a double layer doubles it, holes and
+  retracted rims shrink it).
 
 The sample count sets a floor: a mesh scored against itself does not get 0 (at 100k samples the
 CGAL bunny gives CD-L1 ×10² ≈ 0.24), so always state the count.
@@ -25,6 +30,11 @@ from .geometry import Mesh
 from .sampling import face_areas_and_normals, sample_surface
 
 DEFAULT_THRESHOLDS = (0.005, 0.01)
+LAYER_DISTANCE = 1.0 / 256  # unit frame: one grid spacing at the Table I resolution
+OPPOSITE_COS = -0.5  # normals more than 120 degrees apart face opposite ways
+_LAYER_DENSITY = 4.0  # samples per layer_distance^2 of area
+_LAYER_MAX_SAMPLES = 3_000_000
+_LAYER_NEIGHBOURS = 16
 
 
 def f1_key(threshold: float) -> str:
@@ -87,8 +97,71 @@ def _surface_area(mesh: Mesh) -> float:
     return float(areas.sum())
 
 
+def double_layer_share(vertices: np.ndarray, faces: np.ndarray,
+                       distance: float = LAYER_DISTANCE, seed: int = 0,
+                       max_samples: int = _LAYER_MAX_SAMPLES) -> float:
+    """The share of a mesh's area that has an opposite-facing sheet within ``distance``.
+
+    A surface point counts as double-layered when the mesh has a point within ``distance`` of it
+    whose face normal is more than 120 degrees from its own (``cos < -0.5``): a second,
+    opposite-facing layer on top of the first, as DCUDF's two covers are, or the two sides of a
+    part thinner than ``distance``. Creases (90 degrees) and curvature do not count.
+
+    The mesh is sampled by area at about 4 points per ``distance^2`` (at most ``max_samples``),
+    and each sample looks at its 16 nearest neighbours within ``distance``; the share of the
+    samples that find an opposite-facing neighbour is the share of the area. It relies on the
+    faces' winding: a mesh with randomly flipped faces reads as double-layered.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float; faces : (F, 3) int
+    distance : the layer distance, in the vertices' units
+    seed : seeds the sampling
+    max_samples : cap on the sample count (large meshes get a coarser, still unbiased, estimate)
+
+    Returns
+    -------
+    float in [0, 1] (0 for a mesh without area).
+    """
+    from scipy.spatial import cKDTree
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0 or not distance > 0:
+        return 0.0
+    areas, _ = face_areas_and_normals(vertices, faces)
+    total = float(areas.sum())
+    if not np.isfinite(total) or total <= 0:
+        return 0.0
+    count = int(min(max_samples, max(1000, _LAYER_DENSITY * total / distance ** 2)))
+    points, normals, _ = sample_surface(vertices, faces, count, np.random.default_rng([seed, 2]))
+    tree = cKDTree(points)
+    k = min(_LAYER_NEIGHBOURS, count)
+    double = np.zeros(count, bool)
+    for start in range(0, count, 200_000):
+        stop = min(start + 200_000, count)
+        _, idx = tree.query(points[start:stop], k=k, distance_upper_bound=distance, workers=-1)
+        idx = idx.reshape(stop - start, k)
+        valid = idx < count
+        safe = np.where(valid, idx, 0)
+        cos = np.einsum("qkc,qc->qk", normals[safe], normals[start:stop])
+        double[start:stop] = (valid & (cos < OPPOSITE_COS)).any(axis=1)
+    return float(double.mean())
+
+
+def layer_scores(pred_vertices: np.ndarray, pred_faces: np.ndarray, gt_vertices: np.ndarray,
+                 gt_faces: np.ndarray, distance: float = LAYER_DISTANCE,
+                 seed: int = 0) -> Dict[str, float]:
+    """``double_layer``, ``gt_double_layer`` and ``area_ratio`` of a prediction (same units)."""
+    pred_area = _surface_area(Mesh(pred_vertices, pred_faces))
+    gt_area = _surface_area(Mesh(gt_vertices, gt_faces))
+    return {"double_layer": double_layer_share(pred_vertices, pred_faces, distance, seed),
+            "gt_double_layer": double_layer_share(gt_vertices, gt_faces, distance, seed),
+            "area_ratio": pred_area / gt_area if gt_area > 0 else float("nan")}
+
+
 def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
-             frame=None) -> Dict[str, object]:
+             frame=None, layer_distance: float = LAYER_DISTANCE) -> Dict[str, object]:
     """Score a predicted mesh against a ground-truth mesh.
 
     Parameters
@@ -101,12 +174,15 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
     frame : UnitFrame or None
         Frame both meshes are scored in; None uses the ground truth's vertices' frame
         (bbox centred at 0, longest side 1).
+    layer_distance : distance (unit frame) within which an opposite-facing sheet makes a point
+        double-layered (:func:`double_layer_share`); default one grid spacing at 256.
 
     Returns
     -------
     dict
         ``cd_l1_x100``, ``cd_l2``, ``f1_0.005``, ``f1_0.01``, ``nc`` (floats, distances in the unit
-        frame), ``empty`` (bool, True when the prediction has no surface to sample; then the
+        frame), ``double_layer``, ``gt_double_layer`` and ``area_ratio`` (:func:`layer_scores`),
+        ``empty`` (bool, True when the prediction has no surface to sample; then the
         Chamfer distances are inf and F-scores and NC 0), ``samples`` (int, the count per mesh)
         and ``pred_faces`` (int).
 
@@ -128,6 +204,9 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
         worst = {"cd_l1_x100": float("inf"), "cd_l2": float("inf")}
         worst.update({f1_key(t): 0.0 for t in DEFAULT_THRESHOLDS})
         worst["nc"] = 0.0
+        worst.update({"double_layer": 0.0, "area_ratio": 0.0,
+                      "gt_double_layer": double_layer_share(frame.to_unit(np.asarray(
+                          gt.vertices, dtype=np.float64)), gt.faces, layer_distance, seed)})
         return {**worst, **info, "empty": True}
 
     gt_vertices = frame.to_unit(np.asarray(gt.vertices, dtype=np.float64))
@@ -137,4 +216,6 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
     pred_pts, pred_normals, _ = sample_surface(pred_vertices, pred.faces, samples,
                                                np.random.default_rng([seed, 0]))
     scores = chamfer_f_nc(pred_pts, pred_normals, gt_pts, gt_normals, DEFAULT_THRESHOLDS)
+    scores.update(layer_scores(pred_vertices, pred.faces, gt_vertices, gt.faces, layer_distance,
+                               seed))
     return {**scores, **info}

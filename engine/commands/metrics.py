@@ -16,6 +16,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--samples", type=int, default=100_000,
                         help="area-weighted samples per mesh (default 100000)")
     parser.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    parser.add_argument("--layer-distance", type=float, default=1.0 / 256,
+                        help="unit-frame distance within which an opposite-facing sheet counts "
+                             "as a double layer (default 1/256, one grid spacing at 256)")
 
 
 def run(args) -> int:
@@ -25,7 +28,8 @@ def run(args) -> int:
 
     pred = read_mesh(args.pred)
     gt = read_mesh(args.gt)
-    result = evaluate(pred, gt, samples=args.samples, seed=args.seed)  # in the GT's unit frame
+    result = evaluate(pred, gt, samples=args.samples, seed=args.seed,
+                      layer_distance=args.layer_distance)  # in the GT's unit frame
     strict = {key: (None if isinstance(value, float) and not math.isfinite(value) else value)
               for key, value in result.items()}
     print(json.dumps(strict, allow_nan=False))
