@@ -70,16 +70,82 @@ def _read_geometry(geometry, matrix: np.ndarray) -> PointCloud:
     return PointCloud(points, normals, _color_attribute(geometry, count))
 
 
+def _kind(obj) -> str:
+    """'a camera', 'an empty', 'a grease pencil': the object's type as words."""
+    words = obj.type.lower().replace("_", " ")
+    return f"{'an' if words[0] in 'aeiou' else 'a'} {words}"
+
+
 def _check_object(obj) -> None:
     if obj is None:
         raise InputError("No active object. Select a point cloud (a mesh made of vertices, or a "
                          "point cloud object) and try again.")
     if obj.type not in POINT_TYPES:
-        raise InputError(f"'{obj.name}' is a {obj.type.lower()} object, not a point cloud. "
-                         f"Select a mesh or point cloud object whose points should be meshed.")
+        raise InputError(f"'{obj.name}' is {_kind(obj)}, not a point cloud. Select a mesh or "
+                         f"point cloud object whose points should be meshed.")
     if abs(np.linalg.det(_matrix(obj)[:3, :3])) < 1e-12:
         raise InputError(f"'{obj.name}' has a zero scale on some axis, so its points collapse. "
                          f"Fix its scale (N panel > Item) and try again.")
+
+
+# The custom property that marks an object as a result: the name of the cloud it was made from.
+RESULT_KEY = "udf_reconstruction_source"
+
+
+def result_source_name(obj):
+    """The name of the cloud ``obj`` was reconstructed from, or None when it is not a result."""
+    if obj is None:
+        return None
+    name = obj.get(RESULT_KEY)
+    return name if isinstance(name, str) and name else None
+
+
+class Target:
+    """What the Reconstruct button would work on, and why not when it cannot.
+
+    ``active``: the active object; ``source``: the cloud to reconstruct (the active object, or
+    the cloud a selected result was made from), None when there is none; ``problem``: a sentence
+    for the panel and the button's tooltip, None when Reconstruct can run.
+    """
+
+    def __init__(self, active, source=None, problem=None, count=0):
+        self.active, self.source, self.problem, self.count = active, source, problem, count
+
+    @property
+    def is_result(self) -> bool:
+        return self.source is not None and self.source is not self.active
+
+
+def reconstruct_target(context) -> Target:
+    """The cloud the Reconstruct button would reconstruct in ``context`` (see :class:`Target`).
+
+    Nothing selected (the active object deselected, as after Alt+A) means nothing to do; a
+    selected result of an earlier run means its cloud again, so the result is replaced rather
+    than meshed itself.
+    """
+    view_layer = context.view_layer
+    obj = view_layer.objects.active
+    if obj is None:
+        return Target(None, problem="Select a point cloud first (a mesh of vertices or a point "
+                                    "cloud object)")
+    if context.mode != 'OBJECT':
+        return Target(obj, problem="Switch to Object Mode to reconstruct (Tab)")
+    if not obj.select_get(view_layer=view_layer):
+        return Target(obj, problem="Nothing is selected: select a point cloud first")
+    source = obj
+    source_name = result_source_name(obj)
+    if source_name is not None:
+        source = bpy.data.objects.get(source_name)
+        if source is None or source.name not in view_layer.objects:
+            return Target(obj, problem=f"'{obj.name}' is a reconstructed mesh and its point "
+                                       f"cloud '{source_name}' is gone: select a point cloud")
+    if source.type not in POINT_TYPES:
+        return Target(obj, problem=f"'{source.name}' is {_kind(source)}, not a point cloud: "
+                                   f"select a mesh or point cloud object")
+    count = point_count(context, source)
+    if count == 0:
+        return Target(obj, problem=f"'{source.name}' has no points")
+    return Target(obj, source, None, count)
 
 
 def read_point_cloud(context, obj) -> PointCloud:
@@ -150,19 +216,33 @@ def _copy_transform(source, obj) -> None:
         setattr(obj, name, getattr(source, name))
 
 
-def new_mesh_object(context, mesh: Mesh, name: str, matrix_world, source=None):
-    """Add ``mesh`` (world coordinates) as a new object; return it.
+def _layer_collection(layer_collection, collection):
+    """The view layer's entry for ``collection`` when it and every collection above it are
+    included (not excluded), else None."""
+    if layer_collection.exclude:
+        return None
+    if layer_collection.collection == collection:
+        return layer_collection
+    for child in layer_collection.children:
+        found = _layer_collection(child, collection)
+        if found is not None:
+            return found
+    return None
 
-    The vertices are stored relative to ``matrix_world`` (the source's world matrix when its
-    points were read). With ``source``, the object copies its parent and transform channels, so
-    it sits exactly on the source and moves with the same values, and is linked to the source's
-    first collection (the scene's when that one is excluded from the view layer); without, it
-    gets ``matrix_world`` and the scene's collection. It gets a ``Col`` point colour attribute
-    when the mesh has colours, smooth shading, and becomes the only selected, active object.
-    """
-    inverse = np.linalg.inv(np.array(matrix_world, dtype=np.float64))
-    local = np.asarray(mesh.vertices, dtype=np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
 
+def _home_collection(context, source):
+    """Where a result of ``source`` goes: the source's first collection that the view layer
+    includes, else the scene's collection."""
+    if source is not None:
+        for collection in source.users_collection:
+            if collection == context.scene.collection:
+                return collection
+            if _layer_collection(context.view_layer.layer_collection, collection) is not None:
+                return collection
+    return context.scene.collection
+
+
+def _make_mesh(mesh: Mesh, local: np.ndarray, name: str):
     me = bpy.data.meshes.new(name)
     _fill_mesh(me, local, np.asarray(mesh.faces).reshape(-1, 3))
     if mesh.colors is not None and len(mesh.colors) == len(local):
@@ -174,16 +254,51 @@ def new_mesh_object(context, mesh: Mesh, name: str, matrix_world, source=None):
         me.color_attributes.render_color_index = me.color_attributes.active_color_index
     if len(me.polygons) and hasattr(me, "shade_smooth"):
         me.shade_smooth()
+    return me
 
-    obj = bpy.data.objects.new(name, me)
+
+def previous_result(source_name: str, name: str):
+    """The object an earlier run made from ``source_name`` under ``name``, if it is still there
+    (a result that was renamed is the user's to keep, and is not returned)."""
+    obj = bpy.data.objects.get(name)
+    if obj is not None and obj.type == 'MESH' and result_source_name(obj) == source_name:
+        return obj
+    return None
+
+
+def new_mesh_object(context, mesh: Mesh, name: str, matrix_world, source=None, reuse=None):
+    """Add ``mesh`` (world coordinates) as a new object; return it.
+
+    The vertices are stored relative to ``matrix_world`` (the source's world matrix when its
+    points were read). With ``source``, the object copies its parent and transform channels, so
+    it sits exactly on the source and moves with the same values, is linked to the source's
+    first collection that the view layer includes (else the scene's), and is marked as a result
+    of the source (:data:`RESULT_KEY`); without, it gets ``matrix_world`` and the scene's
+    collection. With ``reuse`` (an earlier result, see :func:`previous_result`) that object gets
+    the new mesh instead: its name, collections, modifiers and materials stay, nothing new is
+    stacked beside it. The mesh gets a ``Col`` point colour attribute when it has colours,
+    smooth shading; the object becomes the only selected, active one.
+    """
+    inverse = np.linalg.inv(np.array(matrix_world, dtype=np.float64))
+    local = np.asarray(mesh.vertices, dtype=np.float64) @ inverse[:3, :3].T + inverse[:3, 3]
     view_layer = context.view_layer
-    collection = source.users_collection[0] if source and source.users_collection else None
-    (collection or context.scene.collection).objects.link(obj)
-    if collection is not None and obj.name not in view_layer.objects:
-        collection.objects.unlink(obj)
-        context.scene.collection.objects.link(obj)
+    me = _make_mesh(mesh, local, name)
+
+    if reuse is not None and reuse.name in view_layer.objects:
+        obj = reuse
+        old = obj.data
+        for material in old.materials:
+            me.materials.append(material)
+        obj.data = me
+        if old.users == 0:
+            bpy.data.meshes.remove(old)
+        me.name = name
+    else:
+        obj = bpy.data.objects.new(name, me)
+        _home_collection(context, source).objects.link(obj)
     if source is not None:
         _copy_transform(source, obj)
+        obj[RESULT_KEY] = source.name
     else:
         obj.matrix_world = matrix_world
     for other in view_layer.objects:

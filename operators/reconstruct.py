@@ -15,7 +15,7 @@ import bpy
 
 from ..engine.errors import Cancelled, InputError
 from ..ui.properties import scene_settings, to_settings
-from . import bridge
+from . import bridge, dependencies, wording
 
 # How often the modal operator looks at the worker's progress (seconds).
 TIMER_SECONDS = 0.25
@@ -29,11 +29,13 @@ class Job:
     def __init__(self, source, cloud, settings):
         self.source_name = source.name
         self.matrix_world = source.matrix_world.copy()
+        self.hide_source = True
         self.cloud = cloud
         self.settings = settings
         self.stop = threading.Event()
         self.fraction = 0.0
         self.message = "Starting"
+        self.stage = "Preparing"
         self.result = None
         self.error = None
         self.seconds = 0.0
@@ -44,7 +46,13 @@ class Job:
         self._reconstruct = reconstruct
 
     def _progress(self, fraction: float, message: str) -> None:
+        self.stage = wording.stage_name(message, self.stage)
         self.fraction, self.message = float(fraction), message
+
+    @property
+    def status_text(self) -> str:
+        """The progress in a few words, short enough for the sidebar: "Distances 58 %"."""
+        return wording.progress_text(self.message, self.fraction, self.stage)
 
     def run(self) -> None:
         start = time.perf_counter()
@@ -69,43 +77,76 @@ def running_job():
     return _job
 
 
+def _check_device(settings) -> None:
+    """Refuse CUDA at once when there is no GPU, instead of after the first stage's work."""
+    if settings.device == "cuda" and not dependencies.gpu_available(wait=True):
+        raise InputError("No GPU was found, so Device cannot be CUDA. Set Device to Auto or CPU "
+                         "and try again.")
+
+
 def start_job(context) -> Job:
-    """Copy the active object's points and settings into a new Job (raises InputError)."""
+    """Copy the target cloud's points and settings into a new Job (raises InputError).
+
+    The target is the selected cloud, or the cloud of a selected earlier result
+    (:func:`bridge.reconstruct_target`).
+    """
     global _job
-    source = context.view_layer.objects.active
-    settings = to_settings(scene_settings(context.scene))
-    cloud = bridge.read_point_cloud(context, source)
-    _job = Job(source, cloud, settings)
+    target = bridge.reconstruct_target(context)
+    if target.source is None:
+        raise InputError(wording.sentence(target.problem))
+    props = scene_settings(context.scene)
+    settings = to_settings(props)
+    _check_device(settings)
+    cloud = bridge.read_point_cloud(context, target.source)
+    _job = Job(target.source, cloud, settings)
+    _job.hide_source = props.hide_source
     return _job
 
 
 def _missing_dependency(error: BaseException):
-    """The third-party package an import failed on, or None (our own bugs are not that)."""
+    """The third-party package an import failed on (its install name), or None (our own bugs
+    are not that)."""
     name = getattr(error, "name", None)
     own = __package__.rsplit(".", 1)[0]
     if isinstance(error, ModuleNotFoundError) and name and not name.startswith(own):
-        return name.split(".")[0]
+        return dependencies.install_name(name)
     return None
-
-
-def _missing_package_message(name: str) -> str:
-    return (f"The Python package '{name}' is missing, so nothing can be reconstructed. "
-            f"Install the UDF Reconstruction zip built for your platform (it bundles its "
-            f"packages); Preferences > Add-ons > UDF Reconstruction lists what was found.")
 
 
 def _report_failure(operator, error: BaseException) -> set:
     """Report an error that is not the user's input; print the traceback for bug reports."""
     missing = _missing_dependency(error)
     if missing:
-        operator.report({'ERROR'}, _missing_package_message(missing))
+        operator.report({'ERROR'}, dependencies.missing_message([missing]))
     elif isinstance(error, MemoryError):
         operator.report({'ERROR'}, "Ran out of memory. Lower the resolution and try again.")
     else:
         traceback.print_exception(type(error), error, error.__traceback__)
         operator.report({'ERROR'}, f"Reconstruction failed ({type(error).__name__}: {error}). "
-                                   f"See the system console for details.")
+                                   f"Please report this with the text from the system console "
+                                   f"(Window > Toggle System Console on Windows).")
     return {'CANCELLED'}
+
+
+def _check_dependencies(operator):
+    """Report missing packages before any work; None when all are there."""
+    missing = dependencies.missing_packages()
+    if not missing:
+        return None
+    operator.report({'ERROR'}, dependencies.missing_message(missing))
+    return {'CANCELLED'}
+
+
+def _log(job: Job, result) -> None:
+    """Everything the engine had to say, for the system console (not the Info log)."""
+    print(f"UDF Reconstruction of '{job.source_name}': {len(result.mesh.faces):,} faces from "
+          f"{len(job.cloud):,} points in {job.seconds:.1f} s")
+    for message in result.messages:
+        print(f"  note: {message}")
+    stats = {k: v for k, v in result.stats.items() if not isinstance(v, dict)}
+    print(f"  stats: {stats}")
+    print(f"  mesher: {result.stats.get('meshing', {})}")
+    print("  seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()))
 
 
 def finish_job(operator, context, job: Job) -> set:
@@ -117,22 +158,26 @@ def finish_job(operator, context, job: Job) -> set:
         operator.report({'INFO'}, "Reconstruction cancelled; nothing was changed.")
         return {'CANCELLED'}
     if isinstance(error, InputError):
-        operator.report({'ERROR'}, str(error))
+        operator.report({'ERROR'}, wording.sentence(str(error)))
         return {'CANCELLED'}
     if error is not None:
         return _report_failure(operator, error)
 
     result = job.result
-    for message in result.messages:
-        operator.report({'WARNING'}, message)
+    _log(job, result)
     if len(result.mesh.faces) == 0:
-        operator.report({'ERROR'}, "No surface was found. Try a larger radius or a lower "
-                                   "resolution.")
+        operator.report({'ERROR'}, "No surface was found. Raise the radius or lower the "
+                                   "resolution, then try again.")
         return {'CANCELLED'}
+    for notice in wording.user_notices(result.messages, job.settings.radius_mode):
+        operator.report({'WARNING'}, notice)
     # Looked up by name: an undo while the job ran invalidates references to bpy data.
     source = bpy.data.objects.get(job.source_name)
-    obj = bridge.new_mesh_object(context, result.mesh, f"{job.source_name}_mesh",
-                                 job.matrix_world, source)
+    name = f"{job.source_name}_mesh"
+    obj = bridge.new_mesh_object(context, result.mesh, name, job.matrix_world, source,
+                                 reuse=bridge.previous_result(job.source_name, name))
+    if job.hide_source and source is not None and source.name in context.view_layer.objects:
+        source.hide_set(True)
     operator.report({'INFO'}, f"Made '{obj.name}': {len(result.mesh.faces):,} faces from "
                               f"{len(job.cloud):,} points in {job.seconds:.1f} s.")
     return {'FINISHED'}
@@ -158,47 +203,41 @@ class UDFR_OT_reconstruct(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        obj = context.view_layer.objects.active
         if _job is not None:
             cls.poll_message_set("A reconstruction is already running; wait for it or cancel it")
             return False
-        if obj is None:
-            cls.poll_message_set("Select a point cloud first (a mesh of vertices or a point "
-                                 "cloud object)")
-            return False
-        if obj.type not in bridge.POINT_TYPES:
-            cls.poll_message_set(f"'{obj.name}' is a {obj.type.lower()}, not a mesh or point "
-                                 f"cloud")
-            return False
-        if context.mode != 'OBJECT':
-            cls.poll_message_set("Switch to Object Mode first")
-            return False
-        if bridge.point_count(context, obj) == 0:
-            cls.poll_message_set(f"'{obj.name}' has no points")
+        problem = bridge.reconstruct_target(context).problem
+        if problem:
+            cls.poll_message_set(problem)
             return False
         return True
 
-    def execute(self, context):
+    def _start(self, context):
+        """The new job, or the operator's result when it cannot start (reported)."""
+        refused = _check_dependencies(self)  # before anything is read or computed
+        if refused:
+            return refused
         try:
-            job = start_job(context)
+            return start_job(context)
         except InputError as error:
-            self.report({'ERROR'}, str(error))
+            self.report({'ERROR'}, wording.sentence(str(error)))
             return {'CANCELLED'}
         except ImportError as error:
             return _report_failure(self, error)
+
+    def execute(self, context):
+        job = self._start(context)
+        if not isinstance(job, Job):
+            return job
         job.run()
         return finish_job(self, context, job)
 
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
-        try:
-            job = start_job(context)
-        except InputError as error:
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
-        except ImportError as error:
-            return _report_failure(self, error)
+        job = self._start(context)
+        if not isinstance(job, Job):
+            return job
         job.start_thread()
         self._timer = context.window_manager.event_timer_add(TIMER_SECONDS,
                                                              window=context.window)
@@ -214,7 +253,7 @@ class UDFR_OT_reconstruct(bpy.types.Operator):
         if event.type != 'TIMER':
             return {'PASS_THROUGH'}
         if job.running:
-            text = f"Reconstructing '{job.source_name}': {job.message} ({job.fraction:.0%})"
+            text = f"Reconstructing '{job.source_name}': {job.status_text}"
             text += " - cancelling" if job.stop.is_set() else " - Esc to cancel"
             if text != self._shown:  # redraw only when there is something new to show
                 self._shown = text

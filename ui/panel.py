@@ -2,9 +2,9 @@
 
 import bpy
 
-from ..operators import bridge
+from ..operators import bridge, dependencies
 from ..operators.reconstruct import running_job
-from .properties import available_radius_modes, scene_settings
+from .properties import DEVICE_ITEMS, available_radius_modes, scene_settings
 
 
 def _length(context, fraction: float, extent: float) -> str:
@@ -12,6 +12,24 @@ def _length(context, fraction: float, extent: float) -> str:
     units = context.scene.unit_settings
     return bpy.utils.units.to_string(units.system, 'LENGTH', fraction * extent * units.scale_length,
                                      precision=3)
+
+
+def _draw_device(layout, props) -> None:
+    """Device as buttons; CUDA greyed out when no GPU was found, and said so."""
+    gpu = dependencies.gpu_available()
+    split = layout.split(factor=0.4, align=True)  # the property-split look: label | buttons
+    heading = split.row()
+    heading.alignment = 'RIGHT'
+    heading.label(text="Device")
+    row = split.row(align=True)
+    for value, name, _ in DEVICE_ITEMS:
+        button = row.row(align=True)
+        button.enabled = not (value == "cuda" and gpu is False)
+        button.prop_enum(props, "device", value, text=name)
+    if gpu is False:
+        line = layout.row()
+        line.alert = props.device == "cuda"
+        line.label(text=dependencies.gpu_text(), icon='ERROR' if line.alert else 'INFO')
 
 
 class UDFR_PT_reconstruct(bpy.types.Panel):
@@ -29,14 +47,28 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
         obj = context.view_layer.objects.active
         job = running_job()
 
-        count = bridge.point_count(context, obj)
-        if obj is None:
-            layout.label(text="No active object", icon='INFO')
-        elif count == 0:
-            layout.label(text=f"{obj.name}: no points", icon='ERROR')
+        missing = dependencies.missing_packages()
+        if missing:
+            column = layout.column(align=True)
+            column.alert = True
+            for name in missing:
+                column.label(text=f"Missing Python package: {name}", icon='ERROR')
+            column.label(text="Install the zip made for your Blender")
+
+        target = bridge.reconstruct_target(context)
+        if job is not None:
+            layout.label(text=f"Reconstructing {job.source_name}", icon='OUTLINER_OB_POINTCLOUD')
+        elif target.problem:
+            row = layout.row()
+            row.alert = obj is not None and context.mode == 'OBJECT' and obj.select_get()
+            row.label(text=target.problem, icon='ERROR' if row.alert else 'INFO')
+        elif target.is_result:
+            layout.label(text=f"{obj.name}: made from {target.source.name}", icon='MESH_DATA')
         else:
-            layout.label(text=f"{obj.name}: {count:,} points", icon='OUTLINER_OB_POINTCLOUD')
-        extent = bridge.world_extent(obj) if count else 0.0
+            layout.label(text=f"{obj.name}: {target.count:,} points",
+                         icon='OUTLINER_OB_POINTCLOUD')
+        count = target.count
+        extent = bridge.world_extent(target.source) if count else 0.0
 
         body = layout.column()
         body.enabled = job is None
@@ -53,9 +85,9 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
                 body.label(text=f"Radius {_length(context, props.radius, extent)}")
         else:
             body.prop(props, "parent_radius")
-            row = body.row(align=True)
-            row.prop(props, "rho_min", text="Range")
-            row.prop(props, "rho_max", text="")
+            column = body.column(align=True)
+            column.prop(props, "rho_min", text="Range Min")
+            column.prop(props, "rho_max", text="Max")
             if extent:
                 low = props.rho_min * props.parent_radius
                 high = props.rho_max * props.parent_radius
@@ -64,13 +96,17 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
         body.prop(props, "resolution")
         if extent:
             body.label(text=f"Cell {_length(context, 1.0 / props.resolution, extent)}")
-        body.prop(props, "device")
+        _draw_device(body, props)
+        body.prop(props, "hide_source")
 
         if job is None:
-            layout.operator("udf_reconstruction.reconstruct", icon='MESH_DATA')
+            text = "Reconstruct"
+            if target.is_result:
+                text = "Reconstruct Again"
+            layout.operator("udf_reconstruction.reconstruct", text=text, icon='MESH_DATA')
             return
         row = layout.row(align=True)
-        text = f"{job.message} ({job.fraction:.0%})"
+        text = job.status_text
         if job.stop.is_set():
             text = "Cancelling..."
         if hasattr(row, "progress"):

@@ -1,43 +1,10 @@
-"""Add-on preferences: which Python packages the engine found.
-
-Nothing is imported to find out (``importlib.util.find_spec`` and the installed metadata only), so
-opening the preferences stays instant and a broken package cannot break the panel.
-"""
-
-import importlib.metadata
-import importlib.util
+"""Add-on preferences: which Python packages the engine found (the table is in
+``operators/dependencies.py``), and whether a GPU can be used."""
 
 import bpy
 
 from .. import __package__ as base_package
-
-# (import name, distribution name, what it is for, required)
-DEPENDENCIES = (
-    ("numpy", "numpy", "arrays (ships with Blender)", True),
-    ("scipy", "scipy", "neighbour search", True),
-    ("skimage", "scikit-image", "marching cubes", True),
-    ("maxflow", "PyMaxflow", "min-cut that splits the double surface", True),
-    ("laspy", "laspy", "reading LAS/LAZ scans (optional)", False),
-    ("torch", "torch", "running on an NVIDIA GPU (optional)", False),
-)
-
-
-def dependency_status() -> list:
-    """One ``(name, version or None, purpose, required)`` per dependency; None = not found."""
-    rows = []
-    for module, distribution, purpose, required in DEPENDENCIES:
-        try:
-            found = importlib.util.find_spec(module) is not None
-        except (ImportError, ValueError):
-            found = False
-        version = None
-        if found:
-            try:
-                version = importlib.metadata.version(distribution)
-            except importlib.metadata.PackageNotFoundError:
-                version = "found"
-        rows.append((distribution, version, purpose, required))
-    return rows
+from ..operators.dependencies import dependency_status, gpu_text
 
 
 class UDFR_AddonPreferences(bpy.types.AddonPreferences):
@@ -55,7 +22,7 @@ class UDFR_AddonPreferences(bpy.types.AddonPreferences):
             else:
                 missing = missing or required
                 row.label(text=f"{name}: not found", icon='ERROR' if required else 'DOT')
-            row.label(text=purpose)
+            row.label(text=gpu_text() if name == "torch" and version is not None else purpose)
         if missing:
             box = layout.box()
             box.label(text="Some required packages are missing.", icon='ERROR')

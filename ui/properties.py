@@ -5,7 +5,7 @@ into the dataclass every entry point (panel, batch script, CLI) hands to the eng
 """
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from ..engine.settings import ReconstructSettings
 
@@ -32,7 +32,7 @@ OUTLIER_ITEMS = (
 DEVICE_ITEMS = (
     ("auto", "Auto", "Use the graphics card when PyTorch with CUDA is installed, else the CPU"),
     ("cpu", "CPU", "Always compute on the processor"),
-    ("cuda", "CUDA", "Compute on an NVIDIA graphics card (needs PyTorch with CUDA)"),
+    ("cuda", "CUDA", "Compute on an NVIDIA graphics card (needs PyTorch with CUDA and a GPU)"),
 )
 
 
@@ -74,21 +74,22 @@ class UDFR_SceneSettings(bpy.types.PropertyGroup):
         step=0.1, precision=3,
     )
     parent_radius: FloatProperty(
-        name="Parent Radius",
-        description="The largest neighbourhood, as a fraction of the cloud's longest side. "
-                    "The chosen radius at each spot lies between Min and Max times this",
+        name="Largest Radius",
+        description="The biggest neighbourhood any spot may use, as a fraction of the cloud's "
+                    "longest side. Each spot gets a radius between Range Min and Max times this. "
+                    "Larger fills holes and smooths noise; smaller keeps thin parts and detail",
         default=_DEFAULTS.parent_radius, min=0.001, max=0.2, soft_min=0.005, soft_max=0.06,
         step=0.1, precision=3,
     )
     rho_min: FloatProperty(
         name="Min",
-        description="Smallest radius allowed, as a share of the parent radius",
+        description="Smallest radius a spot may get, as a share of the Largest Radius",
         default=_DEFAULTS.rho_min, min=0.05, max=1.0, step=1, precision=2,
         subtype='FACTOR', update=_rho_min_changed,
     )
     rho_max: FloatProperty(
         name="Max",
-        description="Largest radius allowed, as a share of the parent radius",
+        description="Biggest radius a spot may get, as a share of the Largest Radius",
         default=_DEFAULTS.rho_max, min=0.05, max=1.0, step=1, precision=2,
         subtype='FACTOR', update=_rho_max_changed,
     )
@@ -120,6 +121,12 @@ class UDFR_SceneSettings(bpy.types.PropertyGroup):
         description="What to do with stray points floating off the surface",
         items=OUTLIER_ITEMS,
         default=_DEFAULTS.outliers,
+    )
+    hide_source: BoolProperty(
+        name="Hide Cloud When Done",
+        description="Hide the point cloud once its mesh is made, so the mesh can be seen (the "
+                    "eye icon in the Outliner shows it again)",
+        default=True,
     )
     outlier_ratio: FloatProperty(
         name="Outlier Ratio",

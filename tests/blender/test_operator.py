@@ -132,10 +132,12 @@ def test_objects_without_points_are_refused_by_poll(scene, kind):
     if kind == "camera":
         obj = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
         scene.collection.objects.link(obj)
-        expected = "'Cam' is a camera, not a mesh or point cloud"
+        obj.select_set(True)
+        expected = "'Cam' is a camera, not a point cloud: select a mesh or point cloud object"
     elif kind == "empty mesh":
         obj = bpy.data.objects.new("Empty", bpy.data.meshes.new("Empty"))
         scene.collection.objects.link(obj)
+        obj.select_set(True)
         expected = "'Empty' has no points"
     else:
         obj = None

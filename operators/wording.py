@@ -1,0 +1,85 @@
+"""What the user reads: short progress labels, sentence-case messages, and which of the engine's
+notes are worth showing (no bpy here).
+
+The engine's progress messages and notes are written for logs ("network UDF: 49,152 / 84,297
+queries", "iso raised from 1.00 to 1.25 voxels"). The sidebar has room for a word and a
+percentage, and the Info log should only hold what a user can act on; the rest goes to the system
+console.
+"""
+
+import re
+
+# First match wins: a word in the engine's progress message -> the stage shown to the user.
+_STAGES = (
+    ("outlier", "Outliers"),
+    ("preparing", "Preparing"),
+    ("band", "Distances"),
+    ("udf", "Distances"),
+    ("radi", "Distances"),
+    ("field", "Distances"),
+    ("quer", "Distances"),
+    ("marching", "Meshing"),
+    ("optimis", "Meshing"),
+    ("optimiz", "Meshing"),
+    ("splitting", "Meshing"),
+    ("meshing", "Meshing"),
+    ("cut", "Meshing"),
+    ("layer", "Meshing"),
+    ("cover", "Meshing"),
+    ("clean", "Meshing"),
+    ("mapping", "Finishing"),
+    ("done", "Finishing"),
+)
+
+
+def stage_name(message: str, previous: str = "Working") -> str:
+    """A one-word stage for an engine progress message ("network UDF: 3 / 8 queries" ->
+    "Distances"); ``previous`` (the stage shown before) for messages it does not know."""
+    lowered = (message or "").lower()
+    for word, stage in _STAGES:
+        if word in lowered:
+            return stage
+    return previous
+
+
+def progress_text(message: str, fraction: float, stage: str = None) -> str:
+    """Short enough for the sidebar: ``"Distances 58 %"`` (``stage`` instead of the one the
+    message names, when given)."""
+    percent = int(min(max(fraction, 0.0), 1.0) * 100 + 1e-6)
+    return f"{stage or stage_name(message)} {percent} %"
+
+
+def sentence(text: str) -> str:
+    """``text`` with a capital first letter and a full stop, as every report is written."""
+    text = (text or "").strip()
+    if not text:
+        return text
+    text = text[0].upper() + text[1:]
+    if text[-1] not in ".!?)":
+        text += "."
+    return text
+
+
+_OUTLIERS = re.compile(r"dropped ([\d,]+) isolated points \(([\d.]+) %\)")
+_SPARSE = re.compile(r"the balls hold only ([\d.]+) points")
+
+
+def user_notices(messages, radius_mode: str = "fixed") -> list:
+    """The engine notes a user can act on, reworded: what happened and what to do about it.
+
+    Every other note (the mesher's iso-value, cut and piece diagnostics) is for the system
+    console only.
+    """
+    radius = "Radius" if radius_mode == "fixed" else "Largest Radius"
+    notices = []
+    for message in messages:
+        match = _OUTLIERS.search(message)
+        if match:
+            notices.append(f"Dropped {match.group(1)} stray points ({match.group(2)} %) before "
+                           f"meshing. To use every point, set Advanced > Outliers to Keep.")
+            continue
+        match = _SPARSE.search(message)
+        if match:
+            notices.append(f"The points are sparse for this radius (about {match.group(1)} "
+                           f"around each spot). If the mesh has holes, raise {radius}.")
+    return notices

@@ -1,0 +1,515 @@
+"""What an artist meets (issue 23): where results land, the panel's states, re-runs, the
+dependency and GPU checks before any work, and the words in the panel and the Info log.
+
+The panel is drawn into a recording stand-in for ``UILayout``, so the bpy module (no window) can
+check what it would show.
+"""
+
+import time
+
+import bpy
+import numpy as np
+import pytest
+
+RESOLUTION = 32
+POINTS = 1500
+
+
+def sphere_points(count: int, radius: float):
+    """(count, 3) points evenly spread on a sphere around the origin (Fibonacci lattice)."""
+    i = np.arange(count) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / count)
+    azimuth = np.pi * (1.0 + 5.0 ** 0.5) * i
+    return radius * np.c_[np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
+                          np.cos(polar)]
+
+
+def add_cloud(name: str, points):
+    """A vertex-only mesh object holding ``points``, selected and active."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(points))
+    mesh.attributes["position"].data.foreach_set(
+        "vector", np.asarray(points, dtype=np.float32).ravel())
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj
+
+
+class Reports:
+    """Stands in for an operator's ``report`` when a job is finished by hand."""
+
+    def __init__(self):
+        self.messages = []
+
+    def report(self, kind, message):
+        self.messages.append((set(kind), message))
+
+
+# --- the panel, drawn into a recorder -------------------------------------------------------------
+
+class Layout:
+    """Records what a panel draws: labels (with alert), props (with enabled), operators."""
+
+    def __init__(self, log, parent=None):
+        self.log, self.parent = log, parent
+        self.enabled = True
+        self.alert = False
+
+    def _child(self, *args, **kwargs):
+        return Layout(self.log, self)
+
+    row = column = box = split = _child
+
+    def _flag(self, name):
+        layout = self
+        while layout is not None:
+            if getattr(layout, name) != (name == "enabled"):
+                return name != "enabled"
+            layout = layout.parent
+        return name == "enabled"
+
+    def label(self, text="", icon='NONE', **kwargs):
+        self.log.append(("label", text, icon, self._flag("alert")))
+
+    def prop(self, data, name, text=None, **kwargs):
+        self.log.append(("prop", name, text, self._flag("enabled")))
+
+    def prop_enum(self, data, name, value, text=None, **kwargs):
+        self.log.append(("prop_enum", value, text, self._flag("enabled")))
+
+    def operator(self, idname, text="", **kwargs):
+        self.log.append(("operator", idname, text, self._flag("enabled")))
+
+    def progress(self, text="", **kwargs):
+        self.log.append(("progress", text, None, True))
+
+
+class Drawn:
+    def __init__(self, log):
+        self.log = log
+
+    @property
+    def labels(self):
+        return [text for kind, text, _, _ in self.log if kind == "label"]
+
+    @property
+    def alerts(self):
+        return [text for kind, text, _, alert in self.log if kind == "label" and alert]
+
+    def prop(self, name):
+        return next(entry for entry in self.log if entry[0] == "prop" and entry[1] == name)
+
+    def enum(self, value):
+        return next(entry for entry in self.log if entry[0] == "prop_enum" and entry[1] == value)
+
+    @property
+    def button(self):
+        return next(entry for entry in self.log if entry[0] == "operator"
+                    and entry[1] == "udf_reconstruction.reconstruct")
+
+
+class _Self:
+    def __init__(self, layout):
+        self.layout = layout
+
+
+def draw(extension, cls="ui.panel:UDFR_PT_reconstruct") -> Drawn:
+    module, name = cls.split(":")
+    log = []
+    getattr(extension.module(module), name).draw(_Self(Layout(log)), bpy.context)
+    return Drawn(log)
+
+
+def poll_message():
+    """The message Blender shows when the Reconstruct button is greyed out."""
+    assert not bpy.ops.udf_reconstruction.reconstruct.poll()
+    with pytest.raises(RuntimeError) as error:
+        bpy.ops.udf_reconstruction.reconstruct()
+    return str(error.value)
+
+
+@pytest.fixture(autouse=True)
+def no_job_left(extension):
+    """A job started by hand and not finished must not block the next test."""
+    yield
+    extension.module("operators.reconstruct")._job = None
+
+
+@pytest.fixture
+def quick(scene):
+    scene.udf_reconstruction.resolution = RESOLUTION
+    return scene
+
+
+@pytest.fixture
+def gpu(extension, monkeypatch):
+    """Set what the GPU probe says: ``gpu(False)``, ``gpu(True, "name")``."""
+    dependencies = extension.module("operators.dependencies")
+
+    def set_gpu(available, name=""):
+        monkeypatch.setitem(dependencies._gpu, "known", True)
+        monkeypatch.setitem(dependencies._gpu, "available", available)
+        monkeypatch.setitem(dependencies._gpu, "name", name)
+
+    return set_gpu
+
+
+# --- 3. results land in the source's collection ---------------------------------------------------
+
+def test_result_lands_in_the_child_collection_of_its_source(quick):
+    scans = bpy.data.collections.new("Scans")
+    quick.collection.children.link(scans)
+    site = bpy.data.collections.new("Site A")
+    scans.children.link(site)
+    cloud = add_cloud("Scan", sphere_points(POINTS, 1.0))
+    quick.collection.objects.unlink(cloud)
+    site.objects.link(cloud)
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    result = bpy.data.objects["Scan_mesh"]
+    assert list(result.users_collection) == [site]
+    assert result.name in bpy.context.view_layer.objects
+
+
+def test_result_skips_a_collection_the_view_layer_excludes(quick):
+    hidden = bpy.data.collections.new("Excluded")
+    shown = bpy.data.collections.new("Shown")
+    quick.collection.children.link(hidden)
+    quick.collection.children.link(shown)
+    cloud = add_cloud("Scan", sphere_points(POINTS, 1.0))
+    quick.collection.objects.unlink(cloud)
+    hidden.objects.link(cloud)
+    shown.objects.link(cloud)
+    bpy.context.view_layer.layer_collection.children["Excluded"].exclude = True
+    bpy.context.view_layer.objects.active = cloud
+    cloud.select_set(True)
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    assert list(bpy.data.objects["Scan_mesh"].users_collection) == [shown]
+
+
+# --- 6. panel states ------------------------------------------------------------------------------
+
+def test_edit_mode_says_to_switch_to_object_mode(quick, extension):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    bpy.ops.object.mode_set(mode='EDIT')
+    try:
+        assert "Switch to Object Mode" in poll_message()
+        assert any("Switch to Object Mode" in text for text in draw(extension).labels)
+        assert not any("no points" in text for text in draw(extension).labels)
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+
+
+def test_a_camera_is_not_a_point_cloud(quick, extension):
+    camera = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    quick.collection.objects.link(camera)
+    bpy.context.view_layer.objects.active = camera
+    camera.select_set(True)
+    expected = "'Cam' is a camera, not a point cloud"
+    assert expected in poll_message()
+    drawn = draw(extension)
+    assert any(expected in text for text in drawn.alerts)
+    assert not any("no points" in text for text in drawn.labels)
+
+
+def test_nothing_selected_reconstructs_nothing(quick, extension):
+    cloud = add_cloud("Scan", sphere_points(POINTS, 1.0))
+    cloud.select_set(False)  # Alt+A: the active object stays active, deselected
+    assert bpy.context.view_layer.objects.active == cloud
+    before = set(bpy.data.objects)
+    assert "Nothing is selected" in poll_message()
+    assert set(bpy.data.objects) == before
+    assert any("Nothing is selected" in text for text in draw(extension).labels)
+    reconstruct = extension.module("operators.reconstruct")
+    with pytest.raises(Exception, match="Nothing is selected"):
+        reconstruct.start_job(bpy.context)  # what invoke() does
+
+
+def test_after_a_run_the_panel_offers_the_cloud_again_not_the_result(quick, extension):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert draw(extension).button[2] == "Reconstruct"
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    result = bpy.context.view_layer.objects.active
+    assert result.name == "Scan_mesh"
+    drawn = draw(extension)
+    assert "Scan_mesh: made from Scan" in drawn.labels
+    assert drawn.button[2] == "Reconstruct Again"
+    target = extension.module("operators.bridge").reconstruct_target(bpy.context)
+    assert target.source == bpy.data.objects["Scan"], "the cloud, not the result, is meshed"
+
+
+def test_rerunning_replaces_the_result_instead_of_stacking_copies(quick, extension):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    first = bpy.data.objects["Scan_mesh"]
+    material = bpy.data.materials.new("Clay")
+    first.data.materials.append(material)
+    old_mesh = first.data.name
+    meshes = len(bpy.data.meshes)
+    quick.udf_reconstruction.resolution = 40
+    # Re-run twice: from the selected result, then from the cloud itself.
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    bpy.data.objects["Scan_mesh"].select_set(False)
+    bpy.data.objects["Scan"].hide_set(False)  # hidden after the first run
+    bpy.context.view_layer.objects.active = bpy.data.objects["Scan"]
+    bpy.data.objects["Scan"].select_set(True)
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    names = sorted(o.name for o in bpy.data.objects)
+    assert names == ["Scan", "Scan_mesh"], names
+    result = bpy.data.objects["Scan_mesh"]
+    assert result == first or result.name == "Scan_mesh"
+    assert result.data.name == "Scan_mesh" and old_mesh == "Scan_mesh"
+    assert len(bpy.data.meshes) == meshes, "the replaced mesh is removed"
+    assert list(result.data.materials) == [material], "the user's material stays"
+    assert len(result.data.polygons) > 0
+    assert bpy.context.view_layer.objects.active == result
+
+
+def test_a_renamed_result_is_kept(quick):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    bpy.data.objects["Scan_mesh"].name = "Scan keep"
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    assert {"Scan", "Scan keep", "Scan_mesh"} <= {o.name for o in bpy.data.objects}
+
+
+@pytest.mark.parametrize("hide", [True, False])
+def test_the_cloud_is_hidden_after_success_when_asked(quick, extension, hide):
+    props = quick.udf_reconstruction
+    assert props.bl_rna.properties["hide_source"].default is True, "on by default"
+    props.hide_source = hide
+    cloud = add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    assert cloud.hide_get() is hide
+    assert draw(extension).prop("hide_source")[3], "the option is in the panel"
+
+
+def test_a_failed_run_does_not_hide_the_cloud(quick):
+    cloud = add_cloud("Three", np.eye(3))
+    with pytest.raises(RuntimeError):
+        bpy.ops.udf_reconstruction.reconstruct()
+    assert not cloud.hide_get()
+
+
+# --- 1. dependencies, checked before any work -----------------------------------------------------
+
+@pytest.fixture
+def missing_package(extension, monkeypatch):
+    dependencies = extension.module("operators.dependencies")
+    monkeypatch.setattr(dependencies, "DEPENDENCIES", dependencies.DEPENDENCIES + (
+        ("udfr_no_such_module", "NoSuchPackage", "testing", True),))
+    return "NoSuchPackage"
+
+
+def test_a_missing_package_is_reported_before_any_work(quick, extension, monkeypatch,
+                                                       missing_package):
+    bridge = extension.module("operators.bridge")
+    reconstruct = extension.module("operators.reconstruct")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the points were read although a package is missing")
+
+    monkeypatch.setattr(bridge, "read_point_cloud", no_work)
+    monkeypatch.setattr(reconstruct, "Job", no_work)
+    add_cloud("Scan", sphere_points(20_000, 1.0))
+    before = set(bpy.data.objects)
+    started = time.perf_counter()
+    with pytest.raises(RuntimeError, match="Missing Python package: NoSuchPackage"):
+        bpy.ops.udf_reconstruction.reconstruct()
+    assert time.perf_counter() - started < 1.0
+    assert set(bpy.data.objects) == before
+    assert reconstruct.running_job() is None
+
+
+def test_the_panel_names_a_missing_package_in_red(quick, extension, missing_package):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert "Missing Python package: NoSuchPackage" in draw(extension).alerts
+
+
+def test_all_present_shows_no_red_line(quick, extension):
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    assert extension.module("operators.dependencies").missing_packages() == []
+    assert not any("Missing" in text for text in draw(extension).labels)
+
+
+def test_packages_are_named_as_users_install_them(extension):
+    dependencies = extension.module("operators.dependencies")
+    reconstruct = extension.module("operators.reconstruct")
+    assert dependencies.install_name("skimage.measure") == "scikit-image"
+    for module, distribution, _, _ in dependencies.DEPENDENCIES:
+        error = ModuleNotFoundError(f"No module named '{module}'", name=module)
+        assert reconstruct._missing_dependency(error) == distribution
+    reports = Reports()
+    reconstruct._report_failure(reports, ModuleNotFoundError("x", name="skimage._shared"))
+    ((kind, message),) = reports.messages
+    assert kind == {'ERROR'} and "scikit-image" in message and "skimage" not in message
+
+
+# --- 7. devices -----------------------------------------------------------------------------------
+
+def test_without_a_gpu_cuda_is_greyed_out_and_refused_at_once(quick, extension, gpu,
+                                                              monkeypatch):
+    gpu(False)
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    drawn = draw(extension)
+    assert drawn.enum("cpu")[3] and drawn.enum("auto")[3]
+    assert not drawn.enum("cuda")[3], "CUDA is greyed out"
+    assert any("No GPU found" in text for text in drawn.labels)
+    quick.udf_reconstruction.device = "cuda"  # e.g. from a file saved on another machine
+    assert any("No GPU found" in text for text in draw(extension).alerts)
+    monkeypatch.setattr(extension.module("operators.bridge"), "read_point_cloud",
+                        lambda *a: pytest.fail("points read before the device was checked"))
+    started = time.perf_counter()
+    with pytest.raises(RuntimeError, match="No GPU was found.*Set Device to Auto or CPU"):
+        bpy.ops.udf_reconstruction.reconstruct()
+    assert time.perf_counter() - started < 1.0
+
+
+def test_with_a_gpu_cuda_is_offered(quick, extension, gpu):
+    gpu(True, "Test GPU")
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    drawn = draw(extension)
+    assert drawn.enum("cuda")[3]
+    assert not any("No GPU" in text for text in drawn.labels)
+
+
+def test_preferences_do_not_claim_a_gpu_that_is_not_there(extension, gpu):
+    gpu(False)
+    labels = draw(extension, "ui.preferences:UDFR_AddonPreferences").labels
+    assert not any("running on" in text or text.startswith("GPU:") for text in labels)
+    assert any("No GPU found" in text for text in labels) or "torch: not found" in labels
+    gpu(True, "Test GPU")
+    labels = draw(extension, "ui.preferences:UDFR_AddonPreferences").labels
+    assert "GPU: Test GPU" in labels or "torch: not found" in labels
+
+
+def test_the_gpu_probe_agrees_with_torch(extension, monkeypatch):
+    dependencies = extension.module("operators.dependencies")
+    monkeypatch.setattr(dependencies, "_gpu", {"known": False, "available": False, "name": "",
+                                               "thread": None})
+    try:
+        import torch
+        expected = torch.cuda.is_available()
+    except ImportError:
+        expected = False
+    assert dependencies.gpu_available(wait=True) is expected
+
+
+# --- 4, 5, 8. words -------------------------------------------------------------------------------
+
+def test_progress_is_a_short_stage_name_and_a_percentage(extension):
+    wording = extension.module("operators.wording")
+    reconstruct = extension.module("engine.reconstruct").reconstruct
+    settings = extension.module("engine.settings").ReconstructSettings(resolution=RESOLUTION)
+    seen = []
+    reconstruct(sphere_points(POINTS, 1.0), settings,
+                progress=lambda fraction, message: seen.append((fraction, message)))
+    texts = {wording.progress_text(message, fraction) for fraction, message in seen}
+    unknown = {message for _, message in seen if wording.stage_name(message) == "Working"}
+    assert not unknown, f"progress messages without a stage name: {unknown}"
+    assert max(len(text) for text in texts) <= 16, texts
+    assert {"Distances", "Meshing"} <= {text.rsplit(" ", 2)[0] for text in texts}
+    assert wording.progress_text("network UDF: 49,152 / 84,297 queries", 0.58) == "Distances 58 %"
+    assert wording.progress_text("optimising the cover (80/100)", 0.8) == "Meshing 80 %"
+
+
+def finished_job(extension, quick, messages, faces=None):
+    """A job run to the end on a small cloud, with the engine's notes replaced by ``messages``."""
+    reconstruct = extension.module("operators.reconstruct")
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    job = reconstruct.start_job(bpy.context)
+    job.run()
+    assert job.error is None
+    job.result.messages = list(messages)
+    if faces is not None:
+        job.result.mesh.faces = np.zeros((0, 3), np.int64)
+    return reconstruct, job
+
+
+MESHER_JARGON = [
+    "iso raised from 1.00 to 1.25 voxels: the cover was fragmented (104 pieces)",
+    "1 component could not be processed (seed regions overlap; unbalanced cut 31642/10570); "
+    "kept as extracted",
+    "2 components could not be split into one layer (not orientable or non-manifold); kept "
+    "double-layered",
+]
+
+
+def test_mesher_jargon_goes_to_the_console_not_the_info_log(quick, extension, capsys):
+    reconstruct, job = finished_job(extension, quick, MESHER_JARGON)
+    reports = Reports()
+    assert reconstruct.finish_job(reports, bpy.context, job) == {'FINISHED'}
+    assert [kind for kind, _ in reports.messages] == [{'INFO'}], reports.messages
+    assert reports.messages[0][1].startswith("Made 'Scan_mesh': ")
+    console = capsys.readouterr().out
+    for message in MESHER_JARGON:
+        assert message in console
+
+
+def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
+    notes = ["dropped 1,234 isolated points (2.5 %) as outliers; set outliers to 'keep' to use "
+             "every point",
+             "the balls hold only 3.2 points on average; for a cloud this sparse, raise the "
+             "radius"] + MESHER_JARGON
+    quick.udf_reconstruction.radius_mode = "learned"
+    reconstruct, job = finished_job(extension, quick, notes)
+    reports = Reports()
+    reconstruct.finish_job(reports, bpy.context, job)
+    warnings = [message for kind, message in reports.messages if kind == {'WARNING'}]
+    assert len(warnings) == 2, warnings
+    assert "Dropped 1,234 stray points (2.5 %)" in warnings[0]
+    assert "Advanced > Outliers to Keep" in warnings[0]
+    assert "raise Largest Radius" in warnings[1]
+    for _, message in reports.messages:
+        assert message[0].isupper() and message.endswith("."), message
+
+
+def test_an_empty_result_is_reported_once(quick, extension):
+    reconstruct, job = finished_job(
+        extension, quick, ["no surface found",
+                           "the mesh is empty: try a larger radius or a lower resolution"],
+        faces=0)
+    before = set(bpy.data.objects)
+    reports = Reports()
+    assert reconstruct.finish_job(reports, bpy.context, job) == {'CANCELLED'}
+    assert len(reports.messages) == 1, reports.messages
+    ((kind, message),) = reports.messages
+    assert kind == {'ERROR'} and message.startswith("No surface was found.")
+    assert set(bpy.data.objects) == before
+    assert not bpy.data.objects["Scan"].hide_get()
+
+
+def test_engine_refusals_are_reported_as_sentences(quick):
+    add_cloud("Three", np.eye(3))
+    with pytest.raises(RuntimeError) as error:
+        bpy.ops.udf_reconstruction.reconstruct()
+    message = str(error.value).split("\n")[0].split(": ", 1)[-1].strip()
+    assert message[0].isupper() and message.endswith("."), message
+
+
+def test_radius_range_fields_are_labelled_for_artists(quick, extension):
+    props = quick.udf_reconstruction
+    props.radius_mode = "learned"
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    drawn = draw(extension)
+    assert drawn.prop("rho_min")[2] == "Range Min"
+    assert drawn.prop("rho_max")[2] == "Max"
+    parent = props.bl_rna.properties["parent_radius"]
+    assert parent.name == "Largest Radius"
+    assert "parent" not in parent.description.lower()
+    for name in ("rho_min", "rho_max"):
+        assert "parent" not in props.bl_rna.properties[name].description.lower()
+
+
+def test_the_running_panel_shows_a_short_progress_text(quick, extension):
+    reconstruct = extension.module("operators.reconstruct")
+    add_cloud("Scan", sphere_points(POINTS, 1.0))
+    job = reconstruct.start_job(bpy.context)
+    job._progress(0.58, "network UDF: 49,152 / 84,297 queries")
+    assert job.status_text == "Distances 58 %"
+    drawn = draw(extension)
+    assert ("progress", "Distances 58 %", None, True) in drawn.log
+    job._progress(0.6, "some stage the engine added later")
+    assert job.status_text == "Distances 60 %", "an unknown message keeps the last stage"
