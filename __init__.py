@@ -1,20 +1,28 @@
 """UDF Reconstruction: turn point clouds into meshes (Blender extension entry point).
 
-Only registration lives here. The engine (``engine/``, no bpy) is imported when a reconstruction
-starts, never while the extension is enabled, so enabling stays fast.
+Only registration lives here, and importing this file imports nothing: bpy, the operators and
+the panel are imported when Blender calls :func:`register`. So the package imports without
+Blender (pytest collects this file as the package of every test, and the engine suite runs in a
+venv without bpy), and the engine (``engine/``, no bpy) is imported only when a reconstruction
+starts, never while the extension is enabled.
 """
 
-import bpy
 
-from .operators import reconstruct
-from .ui import panel, preferences, properties
+def _modules():
+    """The modules whose ``CLASSES`` are registered, in order: properties first (the panel and
+    operators read them), panels last."""
+    from .operators import reconstruct
+    from .ui import panel, preferences, properties
 
-# Properties first (the panel and operators read them), panels last.
-_MODULES = (preferences, properties, reconstruct, panel)
+    return preferences, properties, reconstruct, panel
 
 
 def register():
-    for module in _MODULES:
+    import bpy
+
+    from .ui import properties
+
+    for module in _modules():
         for cls in module.CLASSES:
             bpy.utils.register_class(cls)
     bpy.types.Scene.udf_reconstruction = bpy.props.PointerProperty(
@@ -22,7 +30,9 @@ def register():
 
 
 def unregister():
+    import bpy
+
     del bpy.types.Scene.udf_reconstruction
-    for module in reversed(_MODULES):
+    for module in reversed(_modules()):
         for cls in reversed(module.CLASSES):
             bpy.utils.unregister_class(cls)
