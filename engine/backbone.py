@@ -23,16 +23,18 @@ padded rows never influence the result):
    over the patch's own h2_i with the padding mask (softmax over points, never over the batch).
 5. Head MLP on [pooled, attention outputs, geometric] -> Softplus.
 
-Two implementations of the same forward pass read the same weights file: :class:`UDFBackbone`
-(torch, for training and GPU inference) and :class:`NumpyBackbone` (pure numpy, for Blender).
-torch is imported only inside the functions that need it.
+Two implementations of the same forward pass read the same weights file (the format of
+:mod:`engine.weights_file`): :class:`engine.backbone_torch.UDFBackbone` (torch, for training and
+GPU inference) and :class:`NumpyBackbone` (pure numpy, for Blender). This module never imports
+torch itself: the torch network is imported when it is asked for.
 """
 
-import json
 from pathlib import Path
 from typing import Dict, Optional, Union
 
 import numpy as np
+
+from .weights_file import read_weights, save_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "backbone.npz"
 
@@ -184,106 +186,11 @@ class NumpyBackbone:
 
 # ----------------------------------------------------------------------------- torch network
 
-def _torch_module_class():
-    """Build the torch module class lazily so importing this file never imports torch."""
-    import torch
-    from torch import nn
-
-    def quadratic_inverse(cov, eps, c):
-        return _quadratic_inverse(cov, eps, c, torch)
-
-    def geometric_features(rel, mask, config):
-        rel64 = rel.double()
-        m = mask.double()
-        dist = torch.sqrt(torch.sum(rel64 * rel64, dim=2))
-        padded = torch.where(mask, dist, torch.ones_like(dist))
-        k = config["smallest"]
-        smallest = torch.sort(padded, dim=1).values[:, :k]
-        if smallest.shape[1] < k:
-            fill = smallest.new_ones((smallest.shape[0], k - smallest.shape[1]))
-            smallest = torch.cat([smallest, fill], dim=1)
-        dmin = smallest[:, 0]
-        feats = [smallest[:, j] for j in range(k)]
-        for tau in config["softmin_taus"]:
-            s = torch.sum(m * torch.exp(-(padded - dmin[:, None]) / tau), dim=1)
-            feats.append(dmin - tau * torch.log(s))
-        count = m.sum(dim=1)
-        feats.append(count / 64.0)
-        uniform = m / count[:, None]
-        gauss = m * torch.exp(-(padded / config["gauss_sigma"]) ** 2)
-        gauss = gauss / gauss.sum(dim=1, keepdim=True)
-        for w in (uniform, gauss):
-            c = torch.einsum("bn,bnk->bk", w, rel64)
-            d = rel64 - c[:, None, :]
-            cov = torch.einsum("bn,bni,bnj->bij", w, d, d)
-            trace = cov[:, 0, 0] + cov[:, 1, 1] + cov[:, 2, 2]
-            feats.extend([torch.sqrt(torch.sum(c * c, dim=1)), torch.sqrt(trace)])
-            for alpha in config["plane_alphas"]:
-                eps = alpha * trace + 1e-6
-                feats.append(torch.sqrt(torch.clamp(eps * quadratic_inverse(cov, eps, c), min=0)))
-        return torch.stack(feats, dim=1).float()
-
-    class UDFBackbone(nn.Module):
-        """Torch version of the backbone; forward(rel (B,N,3), mask (B,N) bool) -> (B,) UDF/r."""
-
-        def __init__(self, config: Optional[Dict] = None):
-            super().__init__()
-            self.config = dict(DEFAULT_CONFIG if config is None else config)
-            h, w, heads = self.config["hidden"], self.config["head_width"], self.config["heads"]
-            f = geometric_feature_count(self.config)
-            self.enc0 = nn.Linear(4, h)
-            self.enc1 = nn.Linear(h, h)
-            self.enc2a = nn.Linear(h, h, bias=False)
-            self.enc2b = nn.Linear(h, h)
-            self.enc3 = nn.Linear(h, h)
-            self.query0 = nn.Linear(2 * h + f, w)
-            self.query1 = nn.Linear(w, heads * h)
-            self.head0 = nn.Linear(2 * h + heads * h + f, w)
-            self.head1 = nn.Linear(w, w)
-            self.head2 = nn.Linear(w, 1)
-            with torch.no_grad():
-                self.enc3.weight.mul_(0.1)
-                self.query1.weight.mul_(0.1)
-
-        def forward(self, rel, mask, geo=None):
-            """rel (B, N, 3) float32, mask (B, N) bool -> (B,) UDF / r.
-
-            ``geo`` (B, F) may pass precomputed :func:`geometric_features_np` (they are
-            rotation invariant, so training caches them per patch).
-            """
-            cfg = self.config
-            b, n, _ = rel.shape
-            hdim, heads = cfg["hidden"], cfg["heads"]
-            if geo is None:
-                with torch.no_grad():
-                    geo = geometric_features(rel, mask, cfg)
-            dist = torch.sqrt(torch.sum(rel * rel, dim=2, keepdim=True))
-            x = torch.cat([rel, dist], dim=2)
-            h1 = self.enc1(torch.relu(self.enc0(x)))
-            neg = ~mask[:, :, None]
-            g1 = h1.masked_fill(neg, float("-inf")).max(dim=1).values
-            t = self.enc2a(torch.relu(h1)) + self.enc2b(g1)[:, None, :]
-            h2 = h1 + self.enc3(torch.relu(t))
-            count = mask.sum(dim=1, keepdim=True).float()
-            pmax = h2.masked_fill(neg, float("-inf")).max(dim=1).values
-            pmean = h2.masked_fill(neg, 0.0).sum(dim=1) / count
-            pooled = torch.cat([pmax, pmean, geo], dim=1)
-            query = self.query1(torch.relu(self.query0(pooled))).view(b, heads, hdim)
-            scores = torch.einsum("bhc,bnc->bhn", query, h2) / float(np.sqrt(hdim))
-            scores = scores.masked_fill(~mask[:, None, :], float("-inf"))
-            attn = torch.softmax(scores, dim=2)
-            ctx = torch.einsum("bhn,bnc->bhc", attn, h2).reshape(b, heads * hdim)
-            z = torch.cat([pmax, pmean, ctx, geo], dim=1)
-            z = torch.relu(self.head0(z))
-            z = torch.relu(self.head1(z))
-            return nn.functional.softplus(self.head2(z)[:, 0])
-
-    return UDFBackbone
-
-
 def build_backbone_torch(config: Optional[Dict] = None):
-    """A freshly initialised torch backbone (random weights; for training)."""
-    return _torch_module_class()(config)
+    """A freshly initialised torch :class:`~engine.backbone_torch.UDFBackbone` (for training)."""
+    from .backbone_torch import UDFBackbone
+
+    return UDFBackbone(config)
 
 
 def macs_per_query(config: Dict, points: int = 64) -> int:
@@ -298,39 +205,20 @@ def macs_per_query(config: Dict, points: int = 64) -> int:
 
 # ----------------------------------------------------------------------------- weights file
 
-def save_backbone(module, path: Union[str, Path], meta: Optional[Dict] = None) -> Path:
-    """Write every parameter (float32, torch names) and the config (+ meta) as JSON to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {k: v.detach().cpu().numpy().astype(np.float32) for k, v in module.state_dict().items()}
-    header = {"config": module.config, "meta": meta or {}}
-    arrays["config_json"] = np.array(json.dumps(header))
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(path)
-    return path
-
-
-def _read_weights(path: Union[str, Path, None]):
-    path = Path(DEFAULT_WEIGHTS if path is None else path)
-    if not path.exists():
-        raise FileNotFoundError(f"backbone weights not found: {path}")
-    with np.load(path, allow_pickle=False) as data:
-        header = json.loads(str(data["config_json"]))
-        params = {k: data[k] for k in data.files if k != "config_json"}
-    return params, header
+save_backbone = save_weights  # the shared weights format of engine/weights_file.py
 
 
 def load_backbone_numpy(path: Union[str, Path, None] = None) -> NumpyBackbone:
     """The numpy backbone from a weights file (default ``engine/weights/backbone.npz``)."""
-    params, header = _read_weights(path)
+    params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)
     return NumpyBackbone(params, header["config"])
 
 
 def load_backbone_torch(path: Union[str, Path, None] = None, device: str = "cpu"):
     """The torch backbone (eval mode, on ``device``) from the same weights file."""
     import torch
-    params, header = _read_weights(path)
+
+    params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)
     module = build_backbone_torch(header["config"])
     module.load_state_dict({k: torch.from_numpy(v) for k, v in params.items()})
     return module.to(device).eval()
@@ -338,4 +226,4 @@ def load_backbone_torch(path: Union[str, Path, None] = None, device: str = "cpu"
 
 def weights_meta(path: Union[str, Path, None] = None) -> Dict:
     """The config and training metadata stored in a weights file."""
-    return _read_weights(path)[1]
+    return read_weights(DEFAULT_WEIGHTS if path is None else path)[1]

@@ -19,8 +19,9 @@ A 3-layer MLP with a sigmoid gives s in (0, 1); rho = rho_min + (rho_max - rho_m
 r_hat = rho * R. The range is applied at inference, so changing rho_min / rho_max needs no
 retraining (the network learns where in the range to sit).
 
-Two implementations read one weights file: :class:`NumpySelector` (CPU, Blender) and the torch
-module from :func:`build_selector_torch` (training, CUDA).
+Two implementations read one weights file: :class:`NumpySelector` (CPU, Blender) and
+:class:`engine.selector_torch.RadiusSelector` (training, CUDA). This module never imports torch
+itself: the torch network is imported when it is asked for.
 """
 
 from pathlib import Path
@@ -176,71 +177,11 @@ def predict_radii(selector, tree, points: np.ndarray, queries: np.ndarray, paren
     return (rho_min + (rho_max - rho_min) * s) * parent_radius
 
 
-def _torch_module_class():
-    """The torch module class, built lazily so that importing this file never imports torch."""
-    import torch
-    from torch import nn
-
-    class Block(nn.Module):
-        def __init__(self, size_in, size_out):
-            super().__init__()
-            self.fc0 = nn.Linear(size_in, size_out)
-            self.fc1 = nn.Linear(size_out, size_out)
-            self.shortcut = nn.Linear(size_in, size_out, bias=False)
-            nn.init.zeros_(self.fc1.weight)
-
-        def forward(self, x):
-            return self.fc1(torch.relu(self.fc0(torch.relu(x)))) + self.shortcut(x)
-
-    class RadiusSelector(nn.Module):
-        """forward(rel (B,N,3), mask (B,N) bool, extra (B,EXTRA_FEATURES)) -> (B,) s in (0, 1)."""
-
-        def __init__(self, config: Optional[Dict] = None):
-            super().__init__()
-            self.config = dict(DEFAULT_CONFIG if config is None else config)
-            h = self.config["hidden"]
-            self.pos = nn.Linear(3, 2 * h)
-            for k in range(self.config["blocks"]):
-                setattr(self, f"block{k}", Block(2 * h, h))
-            self.code = nn.Linear(h, self.config["code"])
-            widths = [self.config["code"] + EXTRA_FEATURES] + self.config["mlp"]
-            for k, (a, b) in enumerate(zip(widths, widths[1:])):
-                setattr(self, f"mlp{k}", nn.Linear(a, b))
-            self.out = nn.Linear(widths[-1], 1)
-            self.register_buffer("extra_mean", torch.zeros(EXTRA_FEATURES))
-            self.register_buffer("extra_scale", torch.ones(EXTRA_FEATURES))
-
-        def standardise_extra(self, extra):
-            """Set the extra features' standardisation from training data (Q, EXTRA_FEATURES)."""
-            extra = torch.as_tensor(extra, dtype=torch.float32)
-            self.extra_mean.copy_(extra.mean(dim=0))
-            self.extra_scale.copy_(1.0 / (extra.std(dim=0) + 1e-6))
-
-        def forward(self, rel, mask, extra):
-            return torch.sigmoid(self.logit(rel, mask, extra))
-
-        def logit(self, rel, mask, extra):
-            """The pre-sigmoid output z, s = sigmoid(z) (training watches it)."""
-            neg = ~mask[:, :, None]
-            net = self.pos(rel)
-            for k in range(self.config["blocks"]):
-                if k:
-                    pooled = net.masked_fill(neg, float("-inf")).max(dim=1).values
-                    net = torch.cat([net, pooled[:, None].expand_as(net)], dim=2)
-                net = getattr(self, f"block{k}")(net)
-            pooled = net.masked_fill(neg, float("-inf")).max(dim=1).values
-            extra = (extra - self.extra_mean) * self.extra_scale
-            z = torch.cat([self.code(torch.relu(pooled)), extra], dim=1)
-            for k in range(len(self.config["mlp"])):
-                z = torch.relu(getattr(self, f"mlp{k}")(z))
-            return self.out(z)[:, 0]
-
-    return RadiusSelector
-
-
 def build_selector_torch(config: Optional[Dict] = None):
-    """A freshly initialised torch selector (for training)."""
-    return _torch_module_class()(config)
+    """A freshly initialised torch :class:`~engine.selector_torch.RadiusSelector` (training)."""
+    from .selector_torch import RadiusSelector
+
+    return RadiusSelector(config)
 
 
 def load_selector_numpy(path: Union[str, Path, None] = None) -> NumpySelector:
@@ -270,7 +211,9 @@ class TorchSelector:
 
 
 def load_selector_torch(path: Union[str, Path, None] = None, device: str = "cpu"):
+    """The torch selector (eval mode, on ``device``) from a weights file (default shipped)."""
     import torch
+
     params, header = read_weights(DEFAULT_WEIGHTS if path is None else path)
     module = build_selector_torch(header["config"])
     module.load_state_dict({k: torch.from_numpy(v) for k, v in params.items()})

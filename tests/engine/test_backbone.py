@@ -134,7 +134,6 @@ def test_budget():
     assert bb.macs_per_query(bb.DEFAULT_CONFIG) <= 1_100_000
 
 
-@pytest.mark.skipif(not bb.DEFAULT_WEIGHTS.exists(), reason="no shipped weights yet")
 def test_shipped_weights_beat_the_nearest_point_distance():
     """The shipped backbone on fresh synthetic patches (seed unseen in training)."""
     from engine.training import patch_data as pd
