@@ -23,12 +23,7 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     modules = {}
     for name, (module_name, help_text) in COMMANDS.items():
-        try:
-            module = importlib.import_module(f".commands.{module_name}", __package__)
-        except ModuleNotFoundError as error:
-            if error.name != f"{__package__}.commands.{module_name}":
-                raise
-            continue  # command not built yet
+        module = importlib.import_module(f".commands.{module_name}", __package__)
         modules[name] = module
         module.add_arguments(sub.add_parser(name, help=help_text, description=help_text))
     args = parser.parse_args(argv)

@@ -17,11 +17,6 @@ def no_progress(fraction: float, message: str) -> None:
     """A progress callback that ignores everything."""
 
 
-def never_cancel() -> bool:
-    """A cancel check that never asks to stop."""
-    return False
-
-
 def check_cancel(cancel: Optional[CancelFn]) -> None:
     """Raise :class:`Cancelled` when ``cancel()`` asks to stop."""
     if cancel is not None and cancel():

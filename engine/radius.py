@@ -2,8 +2,7 @@
 
 ``fixed`` gives every query the settings' radius (LoSF-UDF). ``curvature`` (a GeoLA-style
 heuristic, :mod:`.curvature`) and ``learned`` (the selector network) choose a radius per query in
-[rho_min * R, rho_max * R] from the points of the parent ball of radius R. ``learned`` runs once
-the selector's weights file is there; until then it is refused with a message that says so.
+[rho_min * R, rho_max * R] from the points of the parent ball of radius R.
 """
 
 import functools
@@ -55,27 +54,19 @@ def _shipped_selector(device: str = "cpu"):
     return TorchSelector(load_selector_torch(device=device), device)
 
 
-def learned_available() -> bool:
-    """Whether the selector's weights ship with this installation."""
-    from .selector import DEFAULT_WEIGHTS
-
-    return DEFAULT_WEIGHTS.exists()
-
-
 POLICIES: Dict[str, RadiusPolicy] = {
     "fixed": fixed_radii,
     "curvature": curvature_policy,
+    "learned": learned_policy,
 }
-if learned_available():
-    POLICIES["learned"] = learned_policy
 
 
 def require_policy(settings: ReconstructSettings) -> RadiusPolicy:
-    """The policy of ``settings.radius_mode``; :class:`InputError` when it is not built yet."""
+    """The policy of ``settings.radius_mode``; :class:`InputError` for an unknown mode."""
     policy = POLICIES.get(settings.radius_mode)
     if policy is None:
-        raise InputError(f"radius mode {settings.radius_mode!r} is not available yet; "
-                         f"use one of: {', '.join(POLICIES)}")
+        raise InputError(f"radius mode must be one of {', '.join(POLICIES)}, "
+                         f"not {settings.radius_mode!r}")
     return policy
 
 
@@ -132,7 +123,7 @@ def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
     Raises
     ------
     InputError
-        When the radius mode is not available yet.
+        When the radius mode is unknown.
     """
     radii = require_policy(settings)(settings, tree, points, queries, neighbours)
     return np.minimum(radii, max_radius(settings))

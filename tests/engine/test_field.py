@@ -98,14 +98,13 @@ def test_curvature_radii_reach_the_field():
                                atol=1e-7)
 
 
-def test_learned_mode_is_refused_clearly_while_its_weights_are_missing():
+def test_every_radius_mode_has_a_policy_and_an_unknown_one_is_refused():
     from engine.radius import POLICIES
+    from engine.settings import RADIUS_MODES
 
-    if "learned" in POLICIES:
-        pytest.skip("the selector weights are installed")
-    settings = ReconstructSettings(resolution=64, radius_mode="learned")
-    with pytest.raises(InputError, match="radius mode 'learned' is not available yet"):
-        compute_udf_band(sphere_points(), settings)
+    assert set(POLICIES) == set(RADIUS_MODES)
+    with pytest.raises(InputError, match="radius mode must be one of fixed, curvature, learned"):
+        compute_udf_band(sphere_points(), ReconstructSettings(resolution=64, radius_mode="auto"))
 
 
 def test_cancel_stops_the_field():
