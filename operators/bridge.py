@@ -144,7 +144,7 @@ def reconstruct_target(context) -> Target:
                                    f"select a mesh or point cloud object")
     count = point_count(context, source)
     if count == 0:
-        return Target(obj, problem=f"'{source.name}' has no points")
+        return Target(obj, problem=f"'{source.name}' has no points: select an object with vertices or points")
     return Target(obj, source, None, count)
 
 

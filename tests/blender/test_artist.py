@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 RESOLUTION = 32
-POINTS = 1500
+POINTS = 1000
 
 
 def sphere_points(count: int, radius: float):
@@ -244,27 +244,45 @@ def test_rerunning_replaces_the_result_instead_of_stacking_copies(quick, extensi
     add_cloud("Scan", sphere_points(POINTS, 1.0))
     assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
     first = bpy.data.objects["Scan_mesh"]
+    faces = len(first.data.polygons)
     material = bpy.data.materials.new("Clay")
     first.data.materials.append(material)
-    old_mesh = first.data.name
     meshes = len(bpy.data.meshes)
-    quick.udf_reconstruction.resolution = 40
-    # Re-run twice: from the selected result, then from the cloud itself.
+    quick.udf_reconstruction.radius = 0.04
+    assert bpy.context.view_layer.objects.active == first  # re-run from the selected result
     assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
-    bpy.data.objects["Scan_mesh"].select_set(False)
-    bpy.data.objects["Scan"].hide_set(False)  # hidden after the first run
-    bpy.context.view_layer.objects.active = bpy.data.objects["Scan"]
-    bpy.data.objects["Scan"].select_set(True)
-    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
-    names = sorted(o.name for o in bpy.data.objects)
-    assert names == ["Scan", "Scan_mesh"], names
+    assert sorted(o.name for o in bpy.data.objects) == ["Scan", "Scan_mesh"]
     result = bpy.data.objects["Scan_mesh"]
-    assert result == first or result.name == "Scan_mesh"
-    assert result.data.name == "Scan_mesh" and old_mesh == "Scan_mesh"
+    assert result.data.name == "Scan_mesh"
+    assert len(result.data.polygons) not in (0, faces), "the mesh is the new one"
     assert len(bpy.data.meshes) == meshes, "the replaced mesh is removed"
     assert list(result.data.materials) == [material], "the user's material stays"
-    assert len(result.data.polygons) > 0
-    assert bpy.context.view_layer.objects.active == result
+    assert bpy.context.view_layer.objects.active == result and result.select_get()
+
+
+def test_rerunning_from_the_cloud_reuses_the_name_and_undoes_in_one_step(quick):
+    windows = bpy.context.window_manager.windows
+    if not len(windows):
+        pytest.skip("no undo stack without a window")
+    cloud = add_cloud("Scan", sphere_points(POINTS, 1.0))
+    with bpy.context.temp_override(window=windows[0]):
+        bpy.ops.ed.undo_push(message="cloud added")
+        assert bpy.ops.udf_reconstruction.reconstruct('EXEC_DEFAULT', True) == {'FINISHED'}
+        faces = len(bpy.data.objects["Scan_mesh"].data.polygons)
+        cloud = bpy.data.objects["Scan"]
+        cloud.hide_set(False)
+        bpy.data.objects["Scan_mesh"].select_set(False)
+        bpy.context.view_layer.objects.active = cloud
+        cloud.select_set(True)
+        bpy.context.scene.udf_reconstruction.radius = 0.04
+        bpy.ops.ed.undo_push(message="settings")
+        assert bpy.ops.udf_reconstruction.reconstruct('EXEC_DEFAULT', True) == {'FINISHED'}
+        assert sorted(o.name for o in bpy.data.objects) == ["Scan", "Scan_mesh"]
+        assert len(bpy.data.objects["Scan_mesh"].data.polygons) != faces
+        bpy.ops.ed.undo()
+    assert sorted(o.name for o in bpy.data.objects) == ["Scan", "Scan_mesh"]
+    assert len(bpy.data.objects["Scan_mesh"].data.polygons) == faces, "the earlier result is back"
+    assert not bpy.data.objects["Scan"].hide_get()
 
 
 def test_a_renamed_result_is_kept(quick):
