@@ -39,6 +39,7 @@ class Job:
         self.result = None
         self.error = None
         self.seconds = 0.0
+        self.started = None
         self.thread = None
         # Imported here, on the main thread, so a missing dependency shows up at once and
         # enabling the extension never pays for the engine's imports.
@@ -55,7 +56,7 @@ class Job:
         return wording.progress_text(self.message, self.fraction, self.stage)
 
     def run(self) -> None:
-        start = time.perf_counter()
+        self.started = start = time.perf_counter()
         try:
             self.result = self._reconstruct(self.cloud, self.settings,
                                             progress=self._progress, cancel=self.stop.is_set)
@@ -254,6 +255,8 @@ class UDFR_OT_reconstruct(bpy.types.Operator):
             return {'PASS_THROUGH'}
         if job.running:
             text = f"Reconstructing '{job.source_name}': {job.status_text}"
+            if job.started is not None:  # a stage without progress still shows time passing
+                text += f", {time.perf_counter() - job.started:.0f} s"
             text += " - cancelling" if job.stop.is_set() else " - Esc to cancel"
             if text != self._shown:  # redraw only when there is something new to show
                 self._shown = text

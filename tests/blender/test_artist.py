@@ -50,18 +50,51 @@ class Reports:
 
 # --- the panel, drawn into a recorder -------------------------------------------------------------
 
+_UI = bpy.types.UILayout.bl_rna
+_ICONS = {item.identifier for item in _UI.functions["label"].parameters["icon"].enum_items}
+
+
 class Layout:
-    """Records what a panel draws: labels (with alert), props (with enabled), operators."""
+    """Records what a panel draws: labels (with alert), props (with enabled), operators.
+
+    Strict about the API: every call, keyword, attribute and icon must exist on Blender's
+    ``UILayout``, so a draw that passes here does not fail in a real sidebar."""
 
     def __init__(self, log, parent=None):
-        self.log, self.parent = log, parent
-        self.enabled = True
-        self.alert = False
+        object.__setattr__(self, "log", log)
+        object.__setattr__(self, "parent", parent)
+        object.__setattr__(self, "enabled", True)
+        object.__setattr__(self, "alert", False)
 
-    def _child(self, *args, **kwargs):
+    def __setattr__(self, name, value):
+        assert name in _UI.properties, f"UILayout has no attribute {name!r}"
+        object.__setattr__(self, name, value)
+
+    @staticmethod
+    def _check(function, positional, kwargs):
+        parameters = [p.identifier for p in _UI.functions[function].parameters
+                      if p.identifier != "layout"]
+        assert positional <= len(parameters), f"{function}: too many arguments"
+        for name in kwargs:
+            assert name in parameters, f"UILayout.{function} has no keyword {name!r}"
+        icon = kwargs.get("icon")
+        assert icon is None or icon in _ICONS, f"no icon {icon!r}"
+
+    def _child(self, function, args, kwargs):
+        self._check(function, len(args), kwargs)
         return Layout(self.log, self)
 
-    row = column = box = split = _child
+    def row(self, *args, **kwargs):
+        return self._child("row", args, kwargs)
+
+    def column(self, *args, **kwargs):
+        return self._child("column", args, kwargs)
+
+    def box(self, *args, **kwargs):
+        return self._child("box", args, kwargs)
+
+    def split(self, *args, **kwargs):
+        return self._child("split", args, kwargs)
 
     def _flag(self, name):
         layout = self
@@ -72,18 +105,27 @@ class Layout:
         return name == "enabled"
 
     def label(self, text="", icon='NONE', **kwargs):
+        self._check("label", 0, dict(kwargs, icon=icon))
         self.log.append(("label", text, icon, self._flag("alert")))
 
     def prop(self, data, name, text=None, **kwargs):
+        self._check("prop", 2, kwargs)
+        assert name in data.bl_rna.properties, f"no property {name!r}"
         self.log.append(("prop", name, text, self._flag("enabled")))
 
     def prop_enum(self, data, name, value, text=None, **kwargs):
+        self._check("prop_enum", 3, kwargs)
+        assert value in {i.identifier for i in data.bl_rna.properties[name].enum_items}
         self.log.append(("prop_enum", value, text, self._flag("enabled")))
 
     def operator(self, idname, text="", **kwargs):
+        self._check("operator", 1, kwargs)
+        category, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, category), name), f"no operator {idname}"
         self.log.append(("operator", idname, text, self._flag("enabled")))
 
     def progress(self, text="", **kwargs):
+        self._check("progress", 0, kwargs)
         self.log.append(("progress", text, None, True))
 
 
