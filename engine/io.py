@@ -1,8 +1,13 @@
 """Read point clouds and meshes from files; write meshes.
 
-Reading: PLY (ascii and binary, either byte order), OBJ, OFF (with the C/N/ST variants), XYZ,
-PTS and TXT (columns of numbers), NPY, NPZ, LAS and LAZ. Writing: PLY (binary little endian),
-OBJ and OFF. The format is chosen by the file's extension.
+Reading: PLY (ascii and binary, either byte order), OBJ, OFF (with the C/N/ST variants), STL
+(binary and ASCII), XYZ, PTS and TXT (columns of numbers), NPY, NPZ, LAS and LAZ. Writing: PLY
+(binary little endian), OBJ, OFF and STL (binary). The format is chosen by the file's extension.
+
+Writes are atomic: the mesh goes to a temporary file beside the target, which replaces the
+target only once it is complete, so a failed or interrupted write leaves the previous file as it
+was. :func:`check_output_path` refuses an output that cannot be written (or that is one of the
+inputs) before any work is done.
 
 Every problem with a file (missing, unsupported, corrupt, truncated, no points) raises
 :class:`InputError` with one message that names the file and says what is wrong.
@@ -12,6 +17,8 @@ are split into one token array and converted in one call.
 
 import os
 import re
+import secrets
+import shutil
 import struct
 import zipfile
 import zlib
@@ -22,8 +29,8 @@ import numpy as np
 from .errors import InputError
 from .geometry import Mesh, PointCloud
 
-READ_FORMATS = ("PLY", "OBJ", "OFF", "XYZ", "PTS", "TXT", "NPY", "NPZ", "LAS", "LAZ")
-WRITE_FORMATS = ("PLY", "OBJ", "OFF")
+READ_FORMATS = ("PLY", "OBJ", "OFF", "STL", "XYZ", "PTS", "TXT", "NPY", "NPZ", "LAS", "LAZ")
+WRITE_FORMATS = ("PLY", "OBJ", "OFF", "STL")
 
 
 class _BadFile(Exception):
@@ -96,19 +103,25 @@ def read_mesh(path) -> Mesh:
 
 
 def write_mesh(path, mesh: Mesh) -> None:
-    """Write a mesh as PLY (binary little endian), OBJ or OFF, chosen by the extension.
+    """Write a mesh as PLY (binary little endian), OBJ, OFF or STL (binary), by the extension.
 
-    Vertices keep float64 precision (PLY ``double``; 17 significant digits in text formats),
-    normals and colours are written when present; PLY stores colours as uchar, OBJ and OFF as
-    floats in [0, 1].
+    Vertices keep float64 precision (PLY ``double``; 17 significant digits in text formats;
+    STL holds float32 triangles only), normals and colours are written when present; PLY stores
+    colours as uchar, OBJ and OFF as floats in [0, 1].
+
+    The write is atomic: the mesh goes to a hidden temporary file in the target's folder, which
+    replaces the target (``os.replace``) only once it is complete and flushed to disk. When
+    anything fails (a full disk, a file-size limit, an exception, Ctrl-C) the temporary file is
+    removed and an existing target is left exactly as it was. (A process killed outright may
+    leave the hidden ``.NAME.*.tmp`` file behind, never a partial target.)
 
     Parameters
     ----------
     path : str or os.PathLike
-        Destination ending in .ply, .obj or .off; an existing file is replaced.
+        Destination ending in .ply, .obj, .off or .stl; an existing file is replaced.
     mesh : Mesh
-        vertices (V, 3), faces (F, 3) (may be empty), optional normals (V, 3) and colours
-        (V, 3|4) in [0, 1].
+        vertices (V, 3), faces (F, 3) (may be empty, except for STL), optional normals (V, 3)
+        and colours (V, 3|4) in [0, 1].
 
     Raises
     ------
@@ -117,8 +130,7 @@ def write_mesh(path, mesh: Mesh) -> None:
     """
     path = os.fspath(path)
     name = os.path.basename(path) or path
-    extension = os.path.splitext(path)[1].lower().lstrip(".")
-    writer = _WRITERS.get(extension)
+    writer = _WRITERS.get(_extension(path))
     if writer is None:
         raise InputError(f"{name}: cannot write this format; use "
                          f"{', '.join(WRITE_FORMATS[:-1])} or {WRITE_FORMATS[-1]}")
@@ -129,11 +141,112 @@ def write_mesh(path, mesh: Mesh) -> None:
     if mesh.colors is not None:
         colors = np.clip(np.asarray(mesh.colors, dtype=np.float64), 0.0, 1.0)
         colors = colors.reshape(len(colors), -1)
+    if writer is _write_stl and len(faces) == 0:
+        raise InputError(f"{name}: STL stores triangles only and this mesh has none; "
+                         f"use PLY, OBJ or OFF for points")
+    folder = os.path.dirname(os.path.abspath(path))
+    temporary = None
     try:
-        with open(path, "wb") as file:
-            writer(file, vertices, faces, normals, colors)
+        temporary, descriptor = _temporary_file(folder, name)
+        try:
+            with os.fdopen(descriptor, "wb") as file:
+                writer(file, vertices, faces, normals, colors)
+                file.flush()
+                os.fsync(file.fileno())
+            if os.path.exists(path):
+                shutil.copymode(path, temporary)  # the replaced file keeps its permissions
+            os.replace(temporary, path)
+            temporary = None
+        finally:
+            if temporary is not None:
+                _remove_quietly(temporary)
     except OSError as error:
         raise InputError(f"{name}: cannot be written ({error.strerror or error})") from None
+
+
+def check_output_path(path, inputs=()) -> str:
+    """Refuse, before any work, an output that could not be written or would destroy an input.
+
+    Checks that ``path`` is none of ``inputs`` (the same file by ``os.path.samefile``, or the
+    same resolved path), that its extension is one of ``WRITE_FORMATS``, that it is not a
+    folder or a read-only file, and that its folder exists and a file can be created there
+    (tried with a hidden probe file, which is removed at once).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file.
+    inputs : iterable of str or os.PathLike
+        Files that must not be overwritten (the inputs of the run).
+
+    Returns
+    -------
+    str
+        ``path`` as a string.
+
+    Raises
+    ------
+    InputError
+        With a message that says what is wrong and names the paths involved.
+    """
+    path = os.fspath(path)
+    for source in inputs:
+        if same_file(path, source):
+            raise InputError(f"output {path} is the input {os.fspath(source)}: writing it would "
+                             f"destroy the input; choose another output name")
+    if os.path.isdir(path):
+        raise InputError(f"output {path} is a folder; give a file name inside it")
+    extension = _extension(path)
+    if extension not in _WRITERS:
+        what = f"'.{extension}'" if extension else "no extension"
+        raise InputError(f"output {path}: cannot write {what}; give a file name ending in "
+                         f"{', '.join('.' + f.lower() for f in WRITE_FORMATS)}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(f"output {path}: the folder {folder} does not exist; create it first")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise InputError(f"output {path} exists and is read-only; make it writable or choose "
+                         f"another name")
+    try:
+        probe, descriptor = _temporary_file(folder, os.path.basename(path))
+        os.close(descriptor)
+        _remove_quietly(probe)
+    except OSError as error:
+        raise InputError(f"output {path}: cannot create files in {folder} "
+                         f"({error.strerror or error})") from None
+    return path
+
+
+def same_file(first, second) -> bool:
+    """Whether two paths name the same file: the same inode when both exist, else the same
+    resolved path (symbolic links followed, case folded where the system folds it)."""
+    try:
+        return os.path.samefile(first, second)
+    except OSError:
+        pass
+    resolved = [os.path.normcase(os.path.realpath(os.fspath(p))) for p in (first, second)]
+    return resolved[0] == resolved[1]
+
+
+def _extension(path: str) -> str:
+    return os.path.splitext(path)[1].lower().lstrip(".")
+
+
+def _temporary_file(folder: str, name: str) -> Tuple[str, int]:
+    """Create a new hidden file ``.NAME.<random>.tmp`` in ``folder`` -> (path, descriptor).
+
+    Created with mode 0o666 less the umask, like ``open``; never replaces an existing file.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    temporary = os.path.join(folder, f".{name}.{secrets.token_hex(6)}.tmp")
+    return temporary, os.open(temporary, flags, 0o666)
+
+
+def _remove_quietly(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass
 
 
 # --------------------------------------------------------------------------- shared helpers
@@ -835,11 +948,9 @@ def _triple_kind(triple: np.ndarray) -> Optional[str]:
 
 
 def _read_npy(path: str) -> Mesh:
-    try:
-        array = np.load(path, allow_pickle=False)
-    except ValueError as error:
-        raise _BadFile(f"not a readable NPY array ({error})") from None
-    if not isinstance(array, np.ndarray) or array.dtype.kind not in "iuf":
+    with open(path, "rb") as file:
+        array = _npy_array(file, os.fstat(file.fileno()).st_size, "the file")
+    if array.dtype.kind not in "iuf":
         raise _BadFile("the NPY file must hold a numeric (N, 3) or (N, 6) array")
     if array.ndim != 2 or array.shape[1] not in (3, 6):
         raise _BadFile(f"the array has shape {array.shape}; expected (N, 3) points or "
@@ -847,19 +958,84 @@ def _read_npy(path: str) -> Mesh:
     return _split_columns(array.astype(np.float64))
 
 
+def _npy_array(stream, size: int, what: str) -> np.ndarray:
+    """One NPY array from ``stream`` holding ``size`` bytes; the header is checked first.
+
+    The header's shape and dtype must describe exactly the bytes that follow, so a corrupt
+    header (bad syntax, an absurd shape such as a claimed 2 TiB array, object arrays) is
+    refused in one message before anything is allocated.
+    """
+    from numpy.lib import format as npy_format
+
+    try:
+        version = npy_format.read_magic(stream)
+        if version == (1, 0):
+            shape, fortran, dtype = npy_format.read_array_header_1_0(stream)
+        elif version == (2, 0):
+            shape, fortran, dtype = npy_format.read_array_header_2_0(stream)
+        else:
+            shape, fortran, dtype = npy_format._read_array_header(stream, version)
+    except Exception as error:  # the header parser raises ValueError, SyntaxError, TokenError...
+        detail = str(error.args[0] if error.args else "") or type(error).__name__
+        raise _BadFile(f"{what} has a corrupt NPY header "
+                       f"({detail.splitlines()[0][:120]})") from None
+    dtype = np.dtype(dtype)
+    if dtype.hasobject or dtype.itemsize == 0:
+        raise _BadFile(f"{what} holds {dtype} values; expected numbers")
+    if any(not isinstance(n, int) or n < 0 for n in shape):
+        raise _BadFile(f"{what} claims the impossible shape {shape}")
+    needed = dtype.itemsize * int(np.prod(shape, dtype=object))
+    available = size - stream.tell()
+    if needed > available:
+        raise _BadFile(f"{what} claims a {shape} array of {dtype} ({_bytes(needed)}), but "
+                       f"only {_bytes(available)} follow its header: the file is truncated "
+                       f"or its header is corrupt")
+    data = stream.read(needed)
+    if len(data) != needed:
+        raise _BadFile(f"{what} ends after {_bytes(len(data))} of {_bytes(needed)}")
+    return np.frombuffer(data, dtype).reshape(shape, order="F" if fortran else "C")
+
+
+def _bytes(count: int) -> str:
+    """A byte count for people: '912 bytes', '3.1 MiB', '2.18 TiB'."""
+    if count < 1024:
+        return f"{count} bytes"
+    for unit in ("KiB", "MiB", "GiB", "TiB", "PiB"):
+        count /= 1024.0
+        if count < 1024 or unit == "PiB":
+            return f"{count:.3g} {unit}"
+
+
+_NPZ_KEYS = ("points", "vertices", "normals", "colors", "faces")
+
+
 def _read_npz(path: str) -> Mesh:
     try:
-        archive = np.load(path, allow_pickle=False)
-        if not hasattr(archive, "files"):
-            raise _BadFile("not an NPZ archive (it holds a single NPY array)")
-        with archive:
-            arrays = {key: archive[key] for key in archive.files}
-    except (ValueError, zipfile.BadZipFile, zlib.error, EOFError) as error:
+        with zipfile.ZipFile(path) as archive:
+            members = {info.filename[:-4]: info for info in archive.infolist()
+                       if info.filename.endswith(".npy")}
+            arrays = {}
+            for key in _NPZ_KEYS:  # only what we use: a huge extra member is never read
+                info = members.get(key)
+                if info is None:
+                    continue
+                if info.file_size > 1100 * info.compress_size + (1 << 20):  # deflate gives < 1032:1
+                    raise _BadFile(f"'{key}' claims {_bytes(info.file_size)} uncompressed from "
+                                   f"{_bytes(info.compress_size)}: the archive is corrupt")
+                with archive.open(info) as stream:
+                    arrays[key] = _npy_array(stream, info.file_size, f"'{key}'")
+    except zipfile.BadZipFile as error:
+        with open(path, "rb") as file:
+            single = file.read(6) == b"\x93NUMPY"
+        if single:
+            raise _BadFile("not an NPZ archive (it holds a single NPY array)") from None
+        raise _BadFile(f"not a readable NPZ archive ({error})") from None
+    except (zlib.error, EOFError, NotImplementedError, RuntimeError) as error:
         raise _BadFile(f"not a readable NPZ archive ({error})") from None
     key = "points" if "points" in arrays else "vertices" if "vertices" in arrays else None
     if key is None:
         raise _BadFile(f"has no 'points' or 'vertices' array (it has: "
-                       f"{', '.join(sorted(arrays)) or 'nothing'})")
+                       f"{', '.join(sorted(members)) or 'nothing'})")
     vertices = _npz_array(arrays, key, (3,))
     normals = _npz_array(arrays, "normals", (3,)) if "normals" in arrays else None
     colors = None
@@ -887,10 +1063,61 @@ def _npz_array(arrays: dict, key: str, widths: Tuple[int, ...]) -> np.ndarray:
     return array
 
 
+# --------------------------------------------------------------------------- STL
+
+_STL_TRIANGLE = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)),
+                          ("attribute", "<u2")])  # 50 bytes per triangle
+
+
+def _write_stl(file, vertices, faces, normals, colors) -> None:
+    """Binary STL: an 80-byte header, the triangle count, then 50 bytes per triangle (the
+    facet normal from the corners' order, zero for a degenerate triangle; float32)."""
+    corners = vertices[faces]
+    facet = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(facet, axis=1, keepdims=True)
+    facet = np.divide(facet, length, out=np.zeros_like(facet), where=length > 0)
+    table = np.zeros(len(faces), _STL_TRIANGLE)
+    table["normal"], table["corners"] = facet, corners
+    file.write(b"UDF Reconstruction binary STL".ljust(80, b" "))
+    file.write(struct.pack("<I", len(faces)))
+    file.write(table.tobytes())
+
+
+def _read_stl(path: str) -> Mesh:
+    """Binary or ASCII STL -> a mesh whose equal corners are merged into shared vertices."""
+    with open(path, "rb") as file:
+        data = file.read()
+    if len(data) >= 84:
+        count = struct.unpack_from("<I", data, 80)[0]
+        if 84 + count * _STL_TRIANGLE.itemsize == len(data):
+            corners = np.frombuffer(data, _STL_TRIANGLE, count, 84)["corners"]
+            return _stl_mesh(corners.astype(np.float64))
+    if not data.lstrip().startswith(b"solid"):
+        if not data:
+            raise _BadFile("the file is empty")
+        if len(data) >= 84:
+            raise _BadFile(f"a binary STL of {count:,} triangles needs "
+                           f"{84 + count * 50:,} bytes, but the file has {len(data):,}")
+        raise _BadFile("not an STL file (too short for binary STL, no 'solid' line)")
+    rows = [line.split()[1:] for line in data.splitlines() if line.strip().startswith(b"vertex")]
+    if len(rows) % 3 or any(len(row) != 3 for row in rows):
+        raise _BadFile("an ASCII STL facet needs three 'vertex x y z' lines")
+    corners = _numbers([t for row in rows for t in row], "a vertex").reshape(-1, 3, 3)
+    return _stl_mesh(corners)
+
+
+def _stl_mesh(corners: np.ndarray) -> Mesh:
+    if len(corners) == 0:
+        raise _BadFile("the file contains no triangles")
+    vertices, faces = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    return Mesh(vertices, faces.reshape(-1, 3).astype(np.int64), None, None)
+
+
 # --------------------------------------------------------------------------- LAS / LAZ
 
 
 def _read_las(path: str) -> Mesh:
+    _check_las_header(path)  # before laspy: a bad LAZ can make lazrs abort the process
     import laspy  # only LAS/LAZ users need it
 
     try:
@@ -900,6 +1127,12 @@ def _read_las(path: str) -> Mesh:
             raise _BadFile("cannot decompress LAZ; install the 'lazrs' package "
                            "(pip install 'laspy[lazrs]')") from None
         raise _BadFile(f"not a readable LAS/LAZ file ({error})") from None
+    except MemoryError:
+        raise _BadFile("not a readable LAS/LAZ file (its point count does not fit in "
+                       "memory)") from None
+    except Exception as error:  # lazrs.LazrsError and the like: a corrupt compressed body
+        raise _BadFile(f"the LAS/LAZ point data is corrupt or truncated "
+                       f"({type(error).__name__}: {str(error)[:120]})") from None
     # las.x etc. apply the file's scale and offset.
     vertices = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     colors = None
@@ -909,7 +1142,87 @@ def _read_las(path: str) -> Mesh:
     return Mesh(vertices.astype(np.float64), np.zeros((0, 3), np.int64), None, colors)
 
 
-_READERS = {"ply": _read_ply, "obj": _read_obj, "off": _read_off, "xyz": _read_columns,
+_LASZIP_USER = b"laszip encoded"
+_LASZIP_RECORD = 22204
+
+
+def _check_las_header(path: str) -> None:
+    """Check a LAS/LAZ header against the file's size before any point is decompressed.
+
+    The header's sizes and offsets must lie inside the file, the VLRs must end before the
+    point data, an uncompressed body must hold every point it claims, and a LAZ file's chunk
+    table must lie inside the file and list no more chunks than its point count allows. A
+    corrupt or truncated LAZ passing these is still caught when lazrs decodes it; these
+    checks refuse the files that would make lazrs allocate absurd amounts (and abort).
+    """
+    size = os.path.getsize(path)
+    with open(path, "rb") as file:
+        header = file.read(375)
+        if len(header) < 4 or header[:4] != b"LASF":
+            raise _BadFile("not a LAS/LAZ file (it does not start with 'LASF')")
+        if len(header) < 227:
+            raise _BadFile(f"the LAS header is truncated: the file has {size} bytes, a header "
+                           f"needs at least 227")
+        minor = header[25]
+        header_size, point_offset, vlr_count = struct.unpack_from("<HII", header, 94)
+        format_id, record_length, legacy_count = struct.unpack_from("<BHI", header, 104)
+        count = legacy_count
+        if minor >= 4 and header_size >= 375 and len(header) >= 255:
+            count = struct.unpack_from("<Q", header, 247)[0] or legacy_count
+        if not 227 <= header_size <= point_offset <= size:
+            raise _BadFile(f"the LAS header is corrupt: header size {header_size} and point "
+                           f"data offset {point_offset} do not fit a file of {size:,} bytes")
+        if record_length == 0:
+            raise _BadFile("the LAS header is corrupt: a point record length of 0")
+        chunk_size = None
+        at = header_size
+        for _ in range(vlr_count):
+            if at + 54 > point_offset:
+                raise _BadFile(f"the LAS header lists {vlr_count} VLRs, but they run past "
+                               f"the start of the point data at byte {point_offset}")
+            file.seek(at)
+            vlr = file.read(54)
+            length = struct.unpack_from("<H", vlr, 20)[0]
+            if vlr[2:18].rstrip(b"\0") == _LASZIP_USER and struct.unpack_from(
+                    "<H", vlr, 18)[0] == _LASZIP_RECORD and length >= 16:
+                chunk_size = struct.unpack_from("<I", file.read(16), 12)[0]
+            at += 54 + length
+        if at > point_offset:
+            raise _BadFile(f"the LAS VLRs run past the start of the point data at byte "
+                           f"{point_offset}")
+        compressed = bool(format_id & 0xC0)
+        body = size - point_offset
+        if not compressed:
+            if count * record_length > body:
+                raise _BadFile(f"the file claims {count:,} points of {record_length} bytes "
+                               f"({count * record_length:,} bytes) but holds {body:,} bytes "
+                               f"of point data: it is truncated or corrupt")
+            return
+        if chunk_size is None:
+            raise _BadFile("a compressed LAZ file without its 'laszip encoded' VLR")
+        if count and body < 8 + record_length:
+            raise _BadFile(f"the LAZ point data is truncated ({_bytes(body)} for "
+                           f"{count:,} points)")
+        if count == 0:
+            return
+        file.seek(point_offset)
+        table_offset = struct.unpack("<q", file.read(8))[0]
+        if table_offset == -1:
+            return  # written without a chunk table (streamed); lazrs reads chunk by chunk
+        if not point_offset + 8 <= table_offset <= size - 8:
+            raise _BadFile(f"the LAZ chunk table offset {table_offset:,} lies outside the "
+                           f"file ({size:,} bytes): it is truncated or corrupt")
+        file.seek(table_offset)
+        table_version, chunks = struct.unpack("<II", file.read(8))
+        most = count if chunk_size in (0, 0xFFFFFFFF) else -(-count // chunk_size)
+        if table_version != 0 or not 1 <= chunks <= min(most, table_offset - point_offset):
+            raise _BadFile(f"the LAZ chunk table is corrupt (version {table_version}, "
+                           f"{chunks:,} chunks for {count:,} points): the file is truncated "
+                           f"or has been altered")
+
+
+_READERS = {"ply": _read_ply, "obj": _read_obj, "off": _read_off, "stl": _read_stl,
+            "xyz": _read_columns,
             "pts": _read_columns, "txt": _read_columns, "npy": _read_npy, "npz": _read_npz,
             "las": _read_las, "laz": _read_las}
-_WRITERS = {"ply": _write_ply, "obj": _write_obj, "off": _write_off}
+_WRITERS = {"ply": _write_ply, "obj": _write_obj, "off": _write_off, "stl": _write_stl}

@@ -67,8 +67,9 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     ----------
     cloud : PointCloud or (N, 3) float array
         The points in any units; ``colors`` (N, 3|4) in [0, 1] are carried to the mesh.
-    settings : ReconstructSettings, optional
-        Defaults to ``ReconstructSettings()``; radii and resolution are in the unit frame.
+    settings : ReconstructSettings or dict, optional
+        Defaults to ``ReconstructSettings()``; a dict names settings to change from the
+        defaults. Radii and resolution are in the unit frame.
     progress : callable ``(fraction, message)``, optional
         Called with fractions rising from 0 to 1 over the whole reconstruction.
     cancel : callable ``() -> bool``, optional
@@ -94,7 +95,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 
     started = time.perf_counter()
     progress = progress or no_progress
-    settings = (settings if settings is not None else ReconstructSettings()).validate()
+    settings = ReconstructSettings.coerce(settings)
     udf_source = udf_source or getattr(settings, "udf_source", "network")
     if udf_source not in UDF_SOURCES:
         raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")

@@ -1,5 +1,8 @@
 """Settings of one reconstruction: one dataclass shared by the CLI, Blender, batch and benchmark."""
 
+import math
+import numbers
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 
 from .errors import InputError
@@ -8,6 +11,8 @@ from .outliers import POLICIES as OUTLIER_POLICIES
 
 RADIUS_MODES = ("fixed", "curvature", "learned")
 DEVICES = ("auto", "cpu", "cuda")
+MAX_SEED = 2 ** 32 - 1
+"""Seeds are whole numbers in [0, MAX_SEED] (what numpy's generators accept)."""
 
 
 @dataclass
@@ -45,7 +50,10 @@ class ReconstructSettings:
     outlier_ratio: float = DEFAULT_OUTLIER_RATIO
 
     def validate(self) -> "ReconstructSettings":
-        """Raise :class:`InputError` with a clear message when a setting is out of range."""
+        """Raise :class:`InputError` with a clear message when a setting is out of range or of
+        the wrong type (a string resolution, a float or negative seed, ...)."""
+        for item in fields(self):
+            _check_type(item.name, getattr(self, item.name), type(item.default))
         if self.radius_mode not in RADIUS_MODES:
             raise InputError(f"radius mode must be one of {', '.join(RADIUS_MODES)}, "
                              f"not {self.radius_mode!r}")
@@ -60,8 +68,11 @@ class ReconstructSettings:
                              f"rho_min={self.rho_min}, rho_max={self.rho_max}")
         if not 32 <= self.resolution <= 1024:
             raise InputError(f"resolution {self.resolution} is outside [32, 1024]")
+        if not 0 <= self.seed <= MAX_SEED:
+            raise InputError(f"seed {self.seed} is outside [0, {MAX_SEED}]; give a whole number "
+                             f"from 0 to {MAX_SEED}")
         if self.min_component_faces < 0:
-            raise InputError("min_component_faces must be >= 0")
+            raise InputError(f"min_component_faces must be >= 0, not {self.min_component_faces}")
         if self.outliers not in OUTLIER_POLICIES:
             raise InputError(f"outliers must be one of {', '.join(OUTLIER_POLICIES)}, "
                              f"not {self.outliers!r}")
@@ -73,9 +84,44 @@ class ReconstructSettings:
         return asdict(self)
 
     @classmethod
+    def coerce(cls, settings) -> "ReconstructSettings":
+        """Validated settings from None (the defaults), a ReconstructSettings or a dict of
+        settings (``{"resolution": 128}``); anything else is an InputError."""
+        if settings is None:
+            return cls().validate()
+        if isinstance(settings, cls):
+            return settings.validate()
+        if isinstance(settings, Mapping):
+            return cls.from_dict(dict(settings))
+        raise InputError(f"settings must be a ReconstructSettings or a dict of settings, not "
+                         f"{type(settings).__name__}")
+
+    @classmethod
     def from_dict(cls, values: dict) -> "ReconstructSettings":
+        if not isinstance(values, Mapping):
+            raise InputError(f"settings must be a dict, not {type(values).__name__}")
+        if any(not isinstance(key, str) for key in values):
+            raise InputError("settings names must be strings")
         known = {f.name for f in fields(cls)}
         unknown = set(values) - known
         if unknown:
             raise InputError(f"unknown settings: {', '.join(sorted(unknown))}")
         return cls(**values).validate()
+
+
+def _check_type(name: str, value, kind: type) -> None:
+    """Refuse a setting of the wrong type: integers (Python or numpy) for int settings, never
+    floats, which would be truncated silently; real finite numbers for float settings; strings
+    for str settings. Booleans are never numbers here."""
+    label = name.replace("_", " ")
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise InputError(f"{label} must be a whole number, not {value!r} "
+                             f"({type(value).__name__})")
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise InputError(f"{label} must be a number, not {value!r} ({type(value).__name__})")
+        if not math.isfinite(value):
+            raise InputError(f"{label} must be a finite number, not {value!r}")
+    elif kind is str and not isinstance(value, str):
+        raise InputError(f"{label} must be a string, not {value!r} ({type(value).__name__})")

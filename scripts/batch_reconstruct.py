@@ -10,8 +10,18 @@ the same settings the N-panel uses: the open .blend file's panel values (the def
 overridden by the options given here. Meshes are written as ``OUTPUT/<name>.ply`` (``--format``
 picks OBJ or OFF), optionally also gathered into a .blend file and rendered into a PNG preview
 (Workbench, which works in background mode). Progress goes to stdout; the exit status is 0 when
-every input worked, 1 when some failed (each failure is printed with its reason), 2 for bad
-options.
+every input worked, 1 when some failed, 2 for bad options. A failing input (unreadable, corrupt,
+no surface found, even an unexpected error) is reported with its reason and the batch goes on
+to the next; the run ends with a summary that lists every failure.
+
+Before any work the outputs are checked: a mesh that would be written over one of the inputs
+(``--output`` the inputs' own folder with their format), two inputs that would share a mesh, an
+unwritable folder or a ``--device cuda`` without a GPU stop the run with status 2 and nothing
+touched. Meshes are written atomically; an empty result is a failure and writes nothing.
+
+Without Blender's ``bpy`` module (a plain Python with the engine's dependencies) the script
+still reconstructs, with the engine's default settings and the options given here; only
+``--blend`` and ``--preview`` need Blender.
 
 The extension is found in this order: an enabled extension (``--addons bl_ext.<repo>.
 udf_reconstruction``); an installed but disabled one (enabled for the run); else the folder this
@@ -26,12 +36,16 @@ import importlib.util
 import re
 import sys
 import time
+import types
 from dataclasses import fields
 from pathlib import Path
 
-import bpy
 import numpy as np
-from mathutils import Matrix, Vector
+
+try:
+    import bpy
+except ImportError:  # a plain Python: the engine alone (no .blend, no preview)
+    bpy = None
 
 EXTENSION_ID = "udf_reconstruction"
 
@@ -56,11 +70,26 @@ def load_extension():
     return module
 
 
+def load_engine_only():
+    """The package of this checkout without its Blender half: a package module whose
+    ``__init__.py`` (which imports bpy) is not run, so ``<package>.engine`` imports alone."""
+    root = Path(__file__).resolve().parents[1]
+    module = sys.modules.get(EXTENSION_ID)
+    if module is None:
+        module = types.ModuleType(EXTENSION_ID, "UDF Reconstruction (engine only, no bpy)")
+        module.__path__ = [str(root)]
+        module.__file__ = str(root / "__init__.py")
+        sys.modules[EXTENSION_ID] = module
+    return module
+
+
 def script_arguments() -> list:
     """The arguments meant for this script: after ``--`` inside Blender, all of them otherwise."""
     if "--" in sys.argv:
         return sys.argv[sys.argv.index("--") + 1:]
-    return [] if bpy.app.binary_path else sys.argv[1:]  # the bpy module has no binary
+    if bpy is not None and bpy.app.binary_path:
+        return []  # a real Blender without "--": no arguments for us
+    return sys.argv[1:]  # the bpy module (no binary) or a plain Python
 
 
 def build_parser(settings_type, choices, read_formats, write_formats):
@@ -113,8 +142,23 @@ class ProgressPrinter:
             self.last_fraction, self.last_message = fraction, stage
 
 
+def mesh_paths(files, folder: Path, extension: str) -> list:
+    """The mesh file of each input: ``folder/<stem>.<extension>``, a ``_`` added to the stem
+    while it is taken (the same file name in two folders)."""
+    paths, used = [], set()
+    for path in files:
+        name = path.stem
+        while name.lower() in used:
+            name += "_"
+        used.add(name.lower())
+        paths.append(folder / f"{name}.{extension}")
+    return paths
+
+
 def render_preview(context, objects, path: Path) -> None:
     """Render ``objects`` alone with Workbench from a three-quarter view into ``path``."""
+    from mathutils import Vector
+
     scene = context.scene
     hidden = [o for o in scene.objects if o not in objects and not o.hide_render]
     for obj in hidden:
@@ -149,81 +193,137 @@ def render_preview(context, objects, path: Path) -> None:
 
 
 def main() -> int:
-    extension = load_extension()
+    if bpy is not None:
+        extension = load_extension()
+        print(f"extension: {extension.__name__} ({Path(extension.__file__).parent})", flush=True)
+    else:
+        extension = load_engine_only()
+        print(f"engine only, no bpy: {Path(extension.__file__).parent}", flush=True)
     package = extension.__name__
-    print(f"extension: {package} ({Path(extension.__file__).parent})", flush=True)
     engine_io = importlib.import_module(package + ".engine.io")
     errors = importlib.import_module(package + ".engine.errors")
     settings_module = importlib.import_module(package + ".engine.settings")
-    properties = importlib.import_module(package + ".ui.properties")
-    bridge = importlib.import_module(package + ".operators.bridge")
+    preflight = importlib.import_module(package + ".engine.commands.preflight")
 
     choices = {"radius_mode": settings_module.RADIUS_MODES, "device": settings_module.DEVICES,
                "outliers": settings_module.OUTLIER_POLICIES}
     parser = build_parser(settings_module.ReconstructSettings, choices, engine_io.READ_FORMATS,
                           engine_io.WRITE_FORMATS)
     args = parser.parse_args(script_arguments())
+    if bpy is None and (args.blend or args.preview):
+        parser.error("--blend and --preview need Blender (or the bpy module); run the script "
+                     "with blender -b --python, or leave them out")
     files = input_files(args.inputs, engine_io.READ_FORMATS)
     if not files:
         parser.error("no readable point-cloud files in the inputs")
     output = Path(args.output)
-    output.mkdir(parents=True, exist_ok=True)
+    meshes = mesh_paths(files, output, args.format)
 
-    if not bpy.data.filepath:
-        bpy.ops.wm.read_homefile(use_empty=True)  # no file given: start from an empty scene
-    context = bpy.context
-    values = properties.to_settings(properties.scene_settings(context.scene)).to_dict()
+    if bpy is not None:
+        if not bpy.data.filepath:
+            bpy.ops.wm.read_homefile(use_empty=True)  # no file given: start from an empty scene
+        properties = importlib.import_module(package + ".ui.properties")
+        values = properties.to_settings(properties.scene_settings(bpy.context.scene)).to_dict()
+    else:
+        values = settings_module.ReconstructSettings().to_dict()
     values.update({k: getattr(args, k) for k in values if getattr(args, k) is not None})
     try:
         settings = settings_module.ReconstructSettings.from_dict(values)
+        # Before any work: no mesh over an input, writable outputs, a usable device.
+        for mesh_path in meshes:
+            for path in files:
+                if engine_io.same_file(mesh_path, path):
+                    raise errors.InputError(
+                        f"the mesh of {path} would be written to {mesh_path}, which is the "
+                        f"input {path}: choose another --output folder or --format")
+        output.mkdir(parents=True, exist_ok=True)
+        extras = [Path(p) for p in (args.blend, args.preview) if p]
+        for extra in extras:
+            extra.parent.mkdir(parents=True, exist_ok=True)
+        preflight.check_outputs(meshes, files)
+        for extra, kind in ((args.blend, ".blend"), (args.preview, ".png")):
+            if extra:
+                check_extra(Path(extra), kind, files + meshes, engine_io, errors)
+        preflight.check_device(settings.device)
     except errors.InputError as error:
         parser.error(str(error))
+    except OSError as error:
+        parser.error(f"cannot create the output folder: {error}")
     print(f"settings: {settings.to_dict()}", flush=True)
 
     reconstruct = importlib.import_module(package + ".engine.reconstruct").reconstruct
-
-    failed, used_names = [], set()
-    for index, path in enumerate(files, 1):
-        prefix = f"[{index}/{len(files)}] {path.name}:"
-        name = path.stem
-        while name in used_names:  # same file name in two folders
-            name += "_"
-        used_names.add(name)
-        try:
-            cloud = engine_io.read_point_cloud(path)
-            print(f"{prefix} {len(cloud):,} points", flush=True)
-            started = time.perf_counter()
-            result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix))
-            for message in result.messages:
-                print(f"{prefix} note: {message}", flush=True)
-            if len(result.mesh.faces) == 0:
-                raise errors.InputError("no surface was found; try a larger --radius or a "
-                                        "lower --resolution")
-            mesh_path = output / f"{name}.{args.format}"
-            engine_io.write_mesh(mesh_path, result.mesh)
-            print(f"{prefix} wrote {mesh_path} ({len(result.mesh.faces):,} faces, "
-                  f"{time.perf_counter() - started:.1f} s)", flush=True)
-        except (errors.InputError, OSError) as error:
-            print(f"{prefix} error: {error}", file=sys.stderr, flush=True)
-            failed.append(path)
-            continue
-        if args.blend or args.preview:
-            obj = bridge.new_mesh_object(context, result.mesh, name, Matrix.Identity(4))
-            if args.preview:
-                preview = Path(args.preview)
-                if len(files) > 1:
-                    preview = preview.with_name(f"{preview.stem}_{name}{preview.suffix}")
-                preview.parent.mkdir(parents=True, exist_ok=True)
-                render_preview(context, [obj], preview)
-                print(f"{prefix} rendered {preview}", flush=True)
+    failed = []
+    try:
+        for index, (path, mesh_path) in enumerate(zip(files, meshes), 1):
+            prefix = f"[{index}/{len(files)}] {path.name}:"
+            try:
+                result = reconstruct_one(path, mesh_path, settings, prefix, engine_io,
+                                         reconstruct, preflight)
+            except (errors.InputError, OSError) as error:
+                reason = str(error)
+            except errors.Cancelled:
+                raise KeyboardInterrupt from None
+            except Exception as error:  # one input's bug must not stop the others
+                reason = f"unexpected {type(error).__name__}: {error}"
+            else:
+                if args.blend or args.preview:
+                    add_to_scene(result.mesh, mesh_path.stem, args, len(files), prefix,
+                                 package)
+                continue
+            print(f"{prefix} error: {reason}", file=sys.stderr, flush=True)
+            failed.append((path, reason))
+    except KeyboardInterrupt:
+        print("interrupted: the meshes written so far are complete; nothing else was "
+              "written", file=sys.stderr, flush=True)
+        return 130
 
     if args.blend:
-        Path(args.blend).parent.mkdir(parents=True, exist_ok=True)
         bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.blend).resolve()),
                                     check_existing=False)
         print(f"saved {args.blend}", flush=True)
     print(f"done: {len(files) - len(failed)} of {len(files)} reconstructed", flush=True)
+    for path, reason in failed:
+        print(f"failed: {path}: {reason}", flush=True)
     return 1 if failed else 0
+
+
+def reconstruct_one(path, mesh_path, settings, prefix, engine_io, reconstruct, preflight):
+    """Read one input, reconstruct it, write its mesh (atomically); return the result."""
+    cloud = engine_io.read_point_cloud(path)
+    print(f"{prefix} {len(cloud):,} points", flush=True)
+    started = time.perf_counter()
+    result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix))
+    for message in result.messages:
+        print(f"{prefix} note: {message}", flush=True)
+    preflight.check_result(result.mesh)
+    engine_io.write_mesh(mesh_path, result.mesh)
+    print(f"{prefix} wrote {mesh_path} ({len(result.mesh.faces):,} faces, "
+          f"{time.perf_counter() - started:.1f} s)", flush=True)
+    return result
+
+
+def check_extra(path: Path, extension: str, taken, engine_io, errors) -> None:
+    """The .blend or preview file: the right extension, none of the inputs or meshes."""
+    if path.suffix.lower() != extension:
+        raise errors.InputError(f"{path} must end in {extension}")
+    for other in taken:
+        if engine_io.same_file(path, other):
+            raise errors.InputError(f"{path} would be written over {other}")
+
+
+def add_to_scene(mesh, name, args, count, prefix, package) -> None:
+    """Put the mesh in the scene (for --blend) and render its preview (--preview)."""
+    from mathutils import Matrix
+
+    bridge = importlib.import_module(package + ".operators.bridge")
+    context = bpy.context
+    obj = bridge.new_mesh_object(context, mesh, name, Matrix.Identity(4))
+    if args.preview:
+        preview = Path(args.preview)
+        if count > 1:
+            preview = preview.with_name(f"{preview.stem}_{name}{preview.suffix}")
+        render_preview(context, [obj], preview)
+        print(f"{prefix} rendered {preview}", flush=True)
 
 
 if __name__ == "__main__":

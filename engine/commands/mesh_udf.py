@@ -2,7 +2,7 @@
 
 GRID.npz holds ``udf`` (float32 (nx, ny, nz), world units), ``origin`` (3 floats, the world
 position of ``udf[0, 0, 0]``) and ``spacing`` (one float). Prints the stages, the pieces and any
-warnings on stderr; writes the mesh (PLY, OBJ or OFF by extension).
+warnings on stderr; writes the mesh (PLY, OBJ, OFF or STL by extension).
 """
 
 import sys
@@ -15,7 +15,7 @@ from ..errors import InputError
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
     parser.add_argument("grid", help="UDF grid (.npz with udf, origin, spacing)")
-    parser.add_argument("output", help="output mesh (.ply, .obj or .off)")
+    parser.add_argument("output", help="output mesh (.ply, .obj, .off or .stl); never the grid")
     parser.add_argument("--iso", default=None,
                         help="marching-cubes level: '1.0h' in voxels, or an absolute distance "
                              "(default: automatic, about 1 voxel)")
@@ -25,7 +25,8 @@ def add_arguments(parser) -> None:
                         help="keep the double layer (no min-cut)")
     parser.add_argument("--min-component-faces", type=int, default=0,
                         help="drop output pieces with fewer faces (default 0: keep all)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the min-cut (default 0)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the min-cut, 0 to 4294967295 (default 0)")
     parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
                         help="where the optimisation runs: auto (a CUDA GPU when PyTorch sees "
                              "one, else numpy on the CPU), cpu or cuda (default auto)")
@@ -81,7 +82,16 @@ def run(args) -> int:
     """Load the grid, extract the surface, write the mesh; return 0."""
     from ..io import write_mesh
     from ..meshing import MeshingSettings, extract_surface
+    from .preflight import check_device, check_outputs, check_result
 
+    check_outputs([args.output], [args.grid])
+    check_device(args.device)
+    if not 0 <= args.seed <= 2 ** 32 - 1:
+        raise InputError(f"--seed must be a whole number from 0 to 4294967295, got {args.seed}")
+    if args.iterations is not None and args.iterations < 0:
+        raise InputError(f"--iterations must be >= 0, got {args.iterations}")
+    if args.min_component_faces < 0:
+        raise InputError(f"--min-component-faces must be >= 0, got {args.min_component_faces}")
     grid = load_grid(args.grid)
     settings = MeshingSettings(iso=parse_iso(args.iso, grid.spacing), cut=not args.no_cut,
                                min_component_faces=args.min_component_faces, seed=args.seed,
@@ -94,14 +104,15 @@ def run(args) -> int:
 
     result = extract_surface(grid, settings, progress=progress)
     print(file=sys.stderr)
+    for message in result.messages:
+        print(f"warning: {message}", file=sys.stderr)
+    check_result(result.mesh, "meshing the grid")
     write_mesh(args.output, result.mesh)
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items())
     print(f"{len(result.mesh.vertices)} vertices, {len(result.mesh.faces)} faces; iso "
           f"{result.iso / grid.spacing:.2f} voxels; {stages} (optimised on "
           f"{result.stats.get('optimize_device', 'cpu')})", file=sys.stderr)
-    for record in result.components:
+    for record in getattr(result, "components", ()):  # older meshers listed their pieces
         print(f"  piece: {record.status.value} {record.faces}/{record.cover_faces} faces "
               f"{record.detail}", file=sys.stderr)
-    for message in result.messages:
-        print(f"warning: {message}", file=sys.stderr)
     return 0

@@ -3,7 +3,9 @@
 Progress goes to stderr (one updating line on a terminal, a line per 5 % otherwise); the last
 line says where the mesh went, its size and the time. The mesh is in the input's coordinates.
 Ctrl-C cancels at the next check (a second Ctrl-C stops at once). Nothing is written when the
-input is refused or the run is cancelled.
+input is refused, the result is empty or the run is cancelled; the output is checked (writable
+folder, known extension, not the input) and the device too before any work, and the write is
+atomic (a failed write leaves an existing file as it was).
 """
 
 import re
@@ -18,9 +20,10 @@ from ..settings import DEVICES, OUTLIER_POLICIES, RADIUS_MODES, ReconstructSetti
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
     defaults = ReconstructSettings()
-    parser.add_argument("input", help="point cloud or mesh file (.ply, .obj, .off, .xyz, "
+    parser.add_argument("input", help="point cloud or mesh file (.ply, .obj, .off, .stl, .xyz, "
                                       ".pts, .txt, .npy, .npz, .las, .laz)")
-    parser.add_argument("output", help="mesh file to write (.ply, .obj or .off)")
+    parser.add_argument("output", help="mesh file to write (.ply, .obj, .off or .stl); never "
+                                       "the input")
     parser.add_argument("--resolution", type=int, default=defaults.resolution,
                         help=f"grid cells along the longest side (default {defaults.resolution})")
     parser.add_argument("--radius-mode", choices=RADIUS_MODES, default=defaults.radius_mode,
@@ -92,6 +95,7 @@ def run(args) -> int:
     """Read the input, reconstruct, write the output; return the exit status."""
     from ..io import read_point_cloud, write_mesh
     from ..reconstruct import reconstruct
+    from .preflight import check_device, check_outputs, check_result
 
     started = time.perf_counter()
     settings = ReconstructSettings(
@@ -100,6 +104,8 @@ def run(args) -> int:
         device=args.device, seed=args.seed, min_component_faces=args.min_component_faces,
         outliers=args.outliers, outlier_ratio=args.outlier_ratio,
     ).validate()
+    check_outputs([args.output], [args.input])
+    check_device(settings.device)
     progress = _StderrProgress(args.quiet)
     stop = threading.Event()
 
@@ -115,10 +121,12 @@ def run(args) -> int:
     finally:
         signal.signal(signal.SIGINT, previous)
         progress.end_line()
-    write_mesh(args.output, result.mesh)
     if not args.quiet:
         for message in result.messages:
             print(f"note: {message}", file=sys.stderr)
+    check_result(result.mesh)
+    write_mesh(args.output, result.mesh)
+    if not args.quiet:
         print(f"wrote {args.output}: {len(result.mesh.vertices):,} vertices, "
               f"{len(result.mesh.faces):,} faces from {len(cloud):,} points "
               f"in {time.perf_counter() - started:.1f} s", file=sys.stderr)

@@ -71,8 +71,8 @@ def test_points_only_mesh_round_trips_without_faces(tmp_path, extension):
 
 def test_write_refuses_unknown_extension_and_unwritable_path(tmp_path):
     mesh = _mesh(np.random.default_rng(3))
-    with pytest.raises(InputError, match=r"^shape\.stl: cannot write this format; use PLY"):
-        write_mesh(tmp_path / "shape.stl", mesh)
+    with pytest.raises(InputError, match=r"^shape\.abc: cannot write this format; use PLY"):
+        write_mesh(tmp_path / "shape.abc", mesh)
     with pytest.raises(InputError, match=r"^shape\.ply: cannot be written"):
         write_mesh(tmp_path / "no_such_folder" / "shape.ply", mesh)
 
@@ -326,7 +326,7 @@ def test_missing_file_folder_and_unsupported_format(tmp_path):
     _fail(tmp_path / "folder.ply", "is a folder")
     (tmp_path / "scan.e57").write_bytes(b"ASTM-E57")
     _fail(tmp_path / "scan.e57",
-          "unsupported format; use PLY, OBJ, OFF, XYZ, PTS, TXT, NPY, NPZ, LAS or LAZ")
+          "unsupported format; use PLY, OBJ, OFF, STL, XYZ, PTS, TXT, NPY, NPZ, LAS or LAZ")
 
 
 @pytest.mark.parametrize("name", ["e.ply", "e.obj", "e.off", "e.xyz", "e.pts", "e.txt"])
