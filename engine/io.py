@@ -557,6 +557,10 @@ def _read_ply(path: str) -> Mesh:
     for element in elements:
         blocks[element.name], offset = _ply_element_rows(buffer, offset, element, order,
                                                          as_text)
+    if as_text and offset < len(buffer):
+        counts = ", ".join(f"{e.count} {e.plural()}" for e in elements)
+        raise _BadFile(f"the header declares {counts}, but {(len(buffer) - offset) // 8} more "
+                       f"values follow them: the counts in the header are probably wrong")
     vertex = next((e for e in elements if e.name == "vertex"), None)
     if vertex is None:
         raise _BadFile("the PLY file has no 'vertex' element")
@@ -812,10 +816,18 @@ def _read_off(path: str) -> Mesh:
         vertex_count, face_count = int(counts[0]), int(counts[1])
     except (ValueError, IndexError):
         raise _BadFile("the line after 'OFF' must give the vertex and face counts") from None
+    if vertex_count < 0 or face_count < 0:
+        raise _BadFile(f"the header gives {vertex_count} vertices and {face_count} faces; "
+                       f"counts cannot be negative")
     if len(body) < vertex_count:
         raise _BadFile(f"the file ends after {len(body)} of {vertex_count} vertices")
     if len(body) < vertex_count + face_count:
         raise _BadFile(f"the file ends after {len(body) - vertex_count} of {face_count} faces")
+    if len(body) > vertex_count + face_count:
+        extra = len(body) - vertex_count - face_count
+        raise _BadFile(f"the header gives {vertex_count} vertices and {face_count} faces, but "
+                       f"the file has {extra} more line{'s' if extra > 1 else ''}: the counts "
+                       f"in the header are probably wrong")
     table = _table(body[:vertex_count], "a vertex")
     if vertex_count and table.shape[1] < 3:
         raise _BadFile("a vertex has fewer than 3 coordinates")
@@ -838,14 +850,24 @@ def _off_faces(rows: List[bytes]) -> np.ndarray:
     table = _table(rows, "a face")
     sizes = table[:, 0]
     if len(table) and table.shape[1] > sizes[0] and np.all(sizes == sizes[0]):
-        return _fan(table[:, 1:1 + int(sizes[0])])
+        corners = table[:, :1 + int(sizes[0])]
+        if np.all(corners == np.round(corners)):  # else the loop names the bad line
+            return _fan(corners[:, 1:])
     polygons = []
-    for row in rows:
+    for number, row in enumerate(rows, 1):
         values = row.split()
-        size = int(values[0])
+        try:
+            size = int(values[0])
+            corners = [int(v) for v in values[1:size + 1]]
+        except ValueError:
+            raise _BadFile(f"face line {number} ({row[:40].decode('utf-8', 'replace')!r}) is "
+                           f"not 'n i1 .. in' with whole numbers; if it is a vertex, the "
+                           f"vertex count in the header is too small") from None
+        if size < 0:
+            raise _BadFile(f"face line {number} has a negative vertex count {size}")
         if len(values) < size + 1:
             raise _BadFile(f"a face lists {size} vertices but gives only {len(values) - 1}")
-        polygons.append([int(v) for v in values[1:size + 1]])
+        polygons.append(corners)
     return _fan_lists(polygons)
 
 

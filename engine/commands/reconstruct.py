@@ -8,12 +8,14 @@ folder, known extension, not the input) and the device too before any work, and 
 atomic (a failed write leaves an existing file as it was).
 """
 
+import os
 import re
 import signal
 import sys
 import threading
 import time
 
+from ..errors import InputError
 from ..settings import DEVICES, OUTLIER_POLICIES, RADIUS_MODES, ReconstructSettings
 
 
@@ -117,7 +119,12 @@ def run(args) -> int:
     previous = signal.signal(signal.SIGINT, interrupt)
     try:
         cloud = read_point_cloud(args.input)
-        result = reconstruct(cloud, settings, progress, stop.is_set, udf_source=args.udf_source)
+        try:
+            result = reconstruct(cloud, settings, progress, stop.is_set,
+                                 udf_source=args.udf_source)
+        except InputError as error:  # the cloud is refused (NaN, too few points, a line...)
+            progress.end_line()
+            raise InputError(f"{os.path.basename(args.input)}: {error}") from None
     finally:
         signal.signal(signal.SIGINT, previous)
         progress.end_line()

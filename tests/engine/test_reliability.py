@@ -552,3 +552,33 @@ def test_batch_reports_each_bad_input_goes_on_and_ends_with_a_summary(tmp_path):
     mesh = read_mesh(out / "ball.ply")
     assert len(mesh.faces) > 1000
     assert np.abs(np.linalg.norm(mesh.vertices, axis=1) - 0.5).mean() < 0.01
+
+
+# ---------------------------------------------------------------- 10. the small ones
+
+
+@pytest.mark.parametrize("name, content, problem", [
+    ("negative.off", "OFF\n-1 0 0\n0 0 0\n1 0 0\n0 1 0\n", "counts cannot be negative"),
+    ("few.off", "OFF\n2 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+     "the header gives 2 vertices and 1 faces, but the file has 1 more line: the counts"),
+    ("fewer.off", "OFF\n2 2 0\n0 0 0\n1 0 0\n0.5 1 0\n3 0 1 2\n",
+     "face line 1 ('0.5 1 0') is not 'n i1 .. in' with whole numbers; if it is a vertex, "
+     "the vertex count in the header is too small"),
+    ("half.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2.5\n", "face line 1"),
+    ("rows.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                 "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n",
+     "the header declares 2 vertices, but 3 more values follow them"),
+])
+def test_off_and_ascii_ply_counts_that_do_not_match_the_body(tmp_path, name, content, problem):
+    (tmp_path / name).write_text(content)
+    with pytest.raises(InputError) as caught:
+        read_mesh(tmp_path / name)
+    assert str(caught.value).startswith(f"{name}: ") and problem in str(caught.value)
+
+
+def test_a_nan_message_names_the_file(tmp_path):
+    rows = "".join(f"{i} {i * i % 7} {i % 3}\n" for i in range(20))
+    (tmp_path / "holes.xyz").write_text(rows + "nan 0 0\n1 inf 2\n")
+    done = engine_cli("reconstruct", tmp_path / "holes.xyz", tmp_path / "mesh.ply")
+    assert done.returncode == 2
+    assert "error: holes.xyz: 2 of 22 points have NaN or infinite coordinates" in done.stderr
