@@ -88,9 +88,35 @@ def _cuda_driver_present() -> bool:
     return False
 
 
+MIN_PIECE_FACES = 24
+"""A result whose largest piece has fewer faces is junk, not a surface: a real surface spans
+many grid cells (the cloud fills its bounding box, whose longest side has >= 32 cells), while
+a cloud too sparse for the grid gives a scatter of specks of one to a few faces each."""
+
+
 def check_result(mesh, what: str = "the reconstruction") -> None:
-    """Refuse an empty result: a mesh without faces is an error, not a file to write."""
-    if len(mesh.faces) == 0:
+    """Refuse an empty or near-empty result (no faces, or only specks: every piece smaller
+    than :data:`MIN_PIECE_FACES` faces); such a mesh is an error, not a file to write."""
+    faces = len(mesh.faces)
+    advice = ("so nothing was written; the cloud may be too sparse or too small for the grid: "
+              "try a larger --radius or a lower --resolution, or add points")
+    if faces == 0:
         raise InputError(f"{what} found no surface ({len(mesh.vertices):,} vertices, 0 faces), "
-                         f"so nothing was written; the cloud may be too sparse or too small: "
-                         f"try a larger --radius or a lower --resolution, or add points")
+                         f"{advice}")
+    sizes = _piece_sizes(mesh.faces, len(mesh.vertices))
+    if sizes.max() < MIN_PIECE_FACES:
+        raise InputError(f"{what} found no surface, only {len(sizes):,} specks of "
+                         f"{sizes.max()} faces or fewer ({faces:,} faces in all), {advice}")
+
+
+def _piece_sizes(faces, vertex_count: int):
+    """Faces per connected piece (faces sharing a vertex are connected)."""
+    import numpy as np
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    edges = coo_matrix((np.ones(faces.size), (faces.ravel(), np.roll(faces, 1, axis=1).ravel())),
+                       shape=(vertex_count, vertex_count))
+    _, labels = connected_components(edges, directed=False)
+    return np.bincount(labels[faces[:, 0]])

@@ -333,10 +333,32 @@ def test_an_empty_result_is_an_error_and_writes_nothing(tmp_path):
     done = engine_cli("reconstruct", tmp_path / "ten.xyz", previous, "--resolution", "32",
                       "--outliers", "keep")
     assert done.returncode == 2, done.stderr
-    assert "error: the reconstruction found no surface" in done.stderr
+    assert "error: the reconstruction found no surface" in done.stderr, done.stderr
     assert "nothing was written" in done.stderr and "wrote" not in done.stderr
     assert digest(previous) == before, "the previous mesh is not replaced by an empty one"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply", "ten.xyz"]
+
+
+def test_specks_count_as_an_empty_result_but_a_small_surface_does_not():
+    from engine.commands.preflight import MIN_PIECE_FACES, check_result
+
+    def strip(count):  # a strip of 2 * count triangles
+        top = np.c_[np.arange(count + 1), np.zeros(count + 1), np.zeros(count + 1)]
+        vertices = np.concatenate([top, top + [0, 1, 0]])
+        i = np.arange(count)
+        n = count + 1
+        faces = np.concatenate([np.c_[i, i + 1, i + n], np.c_[i + 1, i + n + 1, i + n]])
+        return Mesh(vertices, faces)
+
+    check_result(strip(MIN_PIECE_FACES // 2))  # one piece of MIN_PIECE_FACES faces: a surface
+    specks = [strip(2) for _ in range(30)]  # thirty pieces of four faces
+    offsets = np.cumsum([0] + [len(m.vertices) for m in specks[:-1]])
+    mesh = Mesh(np.concatenate([m.vertices + [5 * k, 0, 0] for k, m in enumerate(specks)]),
+                np.concatenate([m.faces + o for m, o in zip(specks, offsets)]))
+    with pytest.raises(InputError, match="found no surface, only 30 specks of 4 faces or fewer"):
+        check_result(mesh)
+    with pytest.raises(InputError, match=r"found no surface \(3 vertices, 0 faces\)"):
+        check_result(Mesh(np.eye(3), NO_FACES))
 
 
 def test_the_batch_agrees_an_empty_result_is_a_failure(tmp_path):
