@@ -105,11 +105,13 @@ class Target:
 
     ``active``: the active object; ``source``: the cloud to reconstruct (the active object, or
     the cloud a selected result was made from), None when there is none; ``problem``: a sentence
-    for the panel and the button's tooltip, None when Reconstruct can run.
+    for the button's tooltip and the error, None when Reconstruct can run; ``short``: the same in
+    a few words, for the sidebar.
     """
 
-    def __init__(self, active, source=None, problem=None, count=0):
+    def __init__(self, active, source=None, problem=None, count=0, short=None):
         self.active, self.source, self.problem, self.count = active, source, problem, count
+        self.short = short or problem
 
     @property
     def is_result(self) -> bool:
@@ -127,24 +129,29 @@ def reconstruct_target(context) -> Target:
     obj = view_layer.objects.active
     if obj is None:
         return Target(None, problem="Select a point cloud first (a mesh of vertices or a point "
-                                    "cloud object)")
+                                    "cloud object)", short="Select a point cloud")
     if context.mode != 'OBJECT':
-        return Target(obj, problem="Switch to Object Mode to reconstruct (Tab)")
+        return Target(obj, problem="Switch to Object Mode to reconstruct (Tab)",
+                      short="Switch to Object Mode")
     if not obj.select_get(view_layer=view_layer):
-        return Target(obj, problem="Nothing is selected: select a point cloud first")
+        return Target(obj, problem="Nothing is selected: select a point cloud first",
+                      short="Nothing selected")
     source = obj
     source_name = result_source_name(obj)
     if source_name is not None:
         source = bpy.data.objects.get(source_name)
         if source is None or source.name not in view_layer.objects:
             return Target(obj, problem=f"'{obj.name}' is a reconstructed mesh and its point "
-                                       f"cloud '{source_name}' is gone: select a point cloud")
+                                       f"cloud '{source_name}' is gone: select a point cloud",
+                          short=f"{obj.name}: its cloud is gone")
     if source.type not in POINT_TYPES:
         return Target(obj, problem=f"'{source.name}' is {_kind(source)}, not a point cloud: "
-                                   f"select a mesh or point cloud object")
+                                   f"select a mesh or point cloud object",
+                      short=f"{source.name}: not a point cloud")
     count = point_count(context, source)
     if count == 0:
-        return Target(obj, problem=f"'{source.name}' has no points: select an object with vertices or points")
+        return Target(obj, problem=f"'{source.name}' has no points: select an object with "
+                                   f"vertices or points", short=f"{source.name}: no points")
     return Target(obj, source, None, count)
 
 

@@ -22,14 +22,16 @@ def _draw_device(layout, props) -> None:
     heading.alignment = 'RIGHT'
     heading.label(text="Device")
     row = split.row(align=True)
+    row.use_property_split = False
     for value, name, _ in DEVICE_ITEMS:
         button = row.row(align=True)
         button.enabled = not (value == "cuda" and gpu is False)
         button.prop_enum(props, "device", value, text=name)
-    if gpu is False:
+    if gpu is False and props.device != "cpu":
         line = layout.row()
         line.alert = props.device == "cuda"
-        line.label(text=dependencies.gpu_text(), icon='ERROR' if line.alert else 'INFO')
+        line.label(text="No GPU found" if line.alert else "No GPU: runs on the CPU",
+                   icon='ERROR' if line.alert else 'INFO')
 
 
 class UDFR_PT_reconstruct(bpy.types.Panel):
@@ -52,8 +54,8 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
             column = layout.column(align=True)
             column.alert = True
             for name in missing:
-                column.label(text=f"Missing Python package: {name}", icon='ERROR')
-            column.label(text="Install the zip made for your Blender")
+                column.label(text=f"Missing package: {name}", icon='ERROR')
+            column.label(text="See Preferences > Add-ons")
 
         target = bridge.reconstruct_target(context)
         if job is not None:
@@ -61,7 +63,7 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
         elif target.problem:
             row = layout.row()
             row.alert = obj is not None and context.mode == 'OBJECT' and obj.select_get()
-            row.label(text=target.problem, icon='ERROR' if row.alert else 'INFO')
+            row.label(text=target.short, icon='ERROR' if row.alert else 'INFO')
         elif target.is_result:
             layout.label(text=f"{obj.name}: made from {target.source.name}", icon='MESH_DATA')
         else:

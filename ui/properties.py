@@ -123,7 +123,7 @@ class UDFR_SceneSettings(bpy.types.PropertyGroup):
         default=_DEFAULTS.outliers,
     )
     hide_source: BoolProperty(
-        name="Hide Cloud When Done",
+        name="Hide Cloud",
         description="Hide the point cloud once its mesh is made, so the mesh can be seen (the "
                     "eye icon in the Outliner shows it again)",
         default=True,
