@@ -60,7 +60,8 @@ def missing_message(missing) -> str:
 
 
 def dependency_status() -> list:
-    """One ``(install name, version or None, purpose, required)`` per dependency; None = not found."""
+    """One ``(install name, version or None, purpose, required)`` per dependency (None: not
+    found)."""
     rows = []
     for module, distribution, purpose, required in DEPENDENCIES:
         version = None

@@ -196,10 +196,10 @@ def _redraw_panels(context) -> None:
 
 
 class UDFR_OT_reconstruct(bpy.types.Operator):
-    """Build a mesh from the selected point cloud with the settings of the Reconstruct panel. Run again, it replaces that cloud's earlier result"""
-
     bl_idname = "udf_reconstruction.reconstruct"
     bl_label = "Reconstruct"
+    bl_description = ("Build a mesh from the selected point cloud with the settings of the "
+                      "Reconstruct panel. Run again, it replaces that cloud's earlier result")
     bl_options = {'REGISTER', 'UNDO'}
 
     @classmethod
