@@ -73,6 +73,9 @@ def test_panel_settings_become_the_engine_settings(scene, extension):
 
 def test_preferences_list_the_dependencies(extension):
     preferences = extension.module("ui.preferences")
+    dependencies = extension.module("operators.dependencies")
     rows = {name: version for name, version, _, _ in preferences.dependency_status()}
     assert rows["numpy"] is not None
-    assert set(rows) >= {"scipy", "scikit-image", "PyMaxflow"}
+    assert set(rows) >= {"scipy", "scikit-image"}
+    # One table: the preferences list exactly what the Reconstruct button checks.
+    assert list(rows) == [distribution for _, distribution, _, _ in dependencies.DEPENDENCIES]
