@@ -1031,13 +1031,35 @@ def _bytes(count: int) -> str:
 _NPZ_KEYS = ("points", "vertices", "normals", "colors", "faces")
 
 
-def _read_npz(path: str) -> Mesh:
+def read_npz_arrays(path, keys) -> Tuple[dict, List[str]]:
+    """The arrays ``keys`` of an NPZ archive, each header checked before anything is read.
+
+    Returns ``(arrays, names)``: the arrays found among ``keys`` and the names of every array
+    in the archive. Members not in ``keys`` are never read, however big they claim to be.
+
+    Raises
+    ------
+    InputError
+        The file is missing, not an NPZ archive, truncated, or has a corrupt member, with one
+        message naming the file.
+    """
+    path = os.fspath(path)
+    name = os.path.basename(path) or path
+    try:
+        return _npz_members(path, keys)
+    except _BadFile as error:
+        raise InputError(f"{name}: {error}") from None
+    except OSError as error:
+        raise InputError(f"{name}: cannot be read ({error.strerror or error})") from None
+
+
+def _npz_members(path: str, keys) -> Tuple[dict, List[str]]:
     try:
         with zipfile.ZipFile(path) as archive:
             members = {info.filename[:-4]: info for info in archive.infolist()
                        if info.filename.endswith(".npy")}
             arrays = {}
-            for key in _NPZ_KEYS:  # only what we use: a huge extra member is never read
+            for key in keys:  # only what is asked for: a huge extra member is never read
                 info = members.get(key)
                 if info is None:
                     continue
@@ -1054,6 +1076,11 @@ def _read_npz(path: str) -> Mesh:
         raise _BadFile(f"not a readable NPZ archive ({error})") from None
     except (zlib.error, EOFError, NotImplementedError, RuntimeError) as error:
         raise _BadFile(f"not a readable NPZ archive ({error})") from None
+    return arrays, sorted(members)
+
+
+def _read_npz(path: str) -> Mesh:
+    arrays, members = _npz_members(path, _NPZ_KEYS)
     key = "points" if "points" in arrays else "vertices" if "vertices" in arrays else None
     if key is None:
         raise _BadFile(f"has no 'points' or 'vertices' array (it has: "

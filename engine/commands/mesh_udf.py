@@ -34,17 +34,15 @@ def add_arguments(parser) -> None:
 
 def load_grid(path: str):
     """Read GRID.npz into a :class:`~engine.meshing.UDFGrid`; InputError when it is malformed."""
+    from ..io import read_npz_arrays
     from ..meshing import UDFGrid
 
-    try:
-        data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise InputError(f"cannot read {path}: {error}") from None
-    with data:
-        missing = [key for key in ("udf", "origin", "spacing") if key not in data.files]
-        if missing:
-            raise InputError(f"{path} lacks {', '.join(missing)} (needs udf, origin, spacing)")
-        udf, origin, spacing = data["udf"], data["origin"], data["spacing"]
+    data, names = read_npz_arrays(path, ("udf", "origin", "spacing"))
+    missing = [key for key in ("udf", "origin", "spacing") if key not in data]
+    if missing:
+        raise InputError(f"{path} lacks {', '.join(missing)} (needs udf, origin, spacing; it "
+                         f"has {', '.join(names) or 'nothing'})")
+    udf, origin, spacing = data["udf"], data["origin"], data["spacing"]
     if udf.ndim != 3 or not np.issubdtype(udf.dtype, np.number):
         raise InputError(f"udf must be a 3-D numeric array, got shape {udf.shape} "
                          f"of {udf.dtype}")
@@ -52,6 +50,8 @@ def load_grid(path: str):
         raise InputError(f"origin must hold 3 numbers, got shape {np.shape(origin)}")
     if np.size(spacing) != 1:
         raise InputError(f"spacing must be one number, got shape {np.shape(spacing)}")
+    if not (np.isfinite(np.reshape(spacing, ())) and np.reshape(spacing, ()) > 0):
+        raise InputError(f"spacing must be a positive number, got {np.reshape(spacing, ())}")
     if not np.all(np.isfinite(udf)):
         raise InputError("udf contains NaN or infinite values")
     if np.any(udf < 0):

@@ -487,6 +487,24 @@ def test_corrupt_npz_members_give_one_message_naming_the_file(tmp_path):
     assert len(read_point_cloud(tmp_path / "extra.npz")) == 300
 
 
+def test_mesh_udf_corrupt_grid_gives_one_message(tmp_path):
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "grid.npz", "w") as archive:
+        archive.writestr("udf.npy", _npy("{'descr': '<f4', 'fortran_order': False, "
+                                         "'shape': (100000, 100000, 100000), }"))
+        archive.writestr("origin.npy", _npy_bytes(np.zeros(3)))
+        archive.writestr("spacing.npy", _npy_bytes(np.float64(0.1)))
+    done = engine_cli("mesh-udf", tmp_path / "grid.npz", tmp_path / "mesh.ply")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("error: grid.npz: 'udf' claims a (100000, 100000, 100000)")
+    assert "Traceback" not in done.stderr
+    np.savez(tmp_path / "flat.npz", udf=np.ones((4, 4, 4), np.float32), origin=np.zeros(3),
+             spacing=0.0)
+    done = engine_cli("mesh-udf", tmp_path / "flat.npz", tmp_path / "mesh.ply")
+    assert done.returncode == 2 and "spacing must be a positive number" in done.stderr
+
+
 def _npy_bytes(array) -> bytes:
     import io
 
