@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 
-from ..errors import InputError
+from ..errors import Cancelled, InputError
 from ..settings import DEVICES, OUTLIER_POLICIES, RADIUS_MODES, ReconstructSettings
 
 
@@ -112,11 +112,14 @@ def run(args) -> int:
     stop = threading.Event()
 
     def interrupt(signum, frame):
-        # the first Ctrl-C cancels cleanly at the next check; a second one ends at once
+        # the first Ctrl-C (or SIGTERM) cancels cleanly at the next check; a second one ends
+        # at once
         stop.set()
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT
+                      else signal.SIG_DFL)
 
     previous = signal.signal(signal.SIGINT, interrupt)
+    previous_term = signal.signal(signal.SIGTERM, interrupt)
     try:
         cloud = read_point_cloud(args.input)
         try:
@@ -127,14 +130,31 @@ def run(args) -> int:
             raise InputError(f"{os.path.basename(args.input)}: {error}") from None
     finally:
         signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGTERM, previous_term)
         progress.end_line()
     if not args.quiet:
         for message in result.messages:
             print(f"note: {message}", file=sys.stderr)
     check_result(result.mesh)
-    write_mesh(args.output, result.mesh)
+    _write_interruptibly(args.output, result.mesh, write_mesh)
     if not args.quiet:
         print(f"wrote {args.output}: {len(result.mesh.vertices):,} vertices, "
               f"{len(result.mesh.faces):,} faces from {len(cloud):,} points "
               f"in {time.perf_counter() - started:.1f} s", file=sys.stderr)
     return 0
+
+
+def _write_interruptibly(path, mesh, write_mesh) -> None:
+    """Write the mesh; Ctrl-C or SIGTERM during the write stops it, removes the partial
+    temporary file and leaves any existing output as it was (raises Cancelled)."""
+
+    def stop_writing(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop_writing)
+    try:
+        write_mesh(path, mesh)
+    except KeyboardInterrupt:
+        raise Cancelled() from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)

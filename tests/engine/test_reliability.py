@@ -622,3 +622,48 @@ def test_a_nan_message_names_the_file(tmp_path):
     done = engine_cli("reconstruct", tmp_path / "holes.xyz", tmp_path / "mesh.ply")
     assert done.returncode == 2
     assert "error: holes.xyz: 2 of 22 points have NaN or infinite coordinates" in done.stderr
+
+
+_SLOW_WRITE_CLI = textwrap.dedent("""
+    import sys, time
+    sys.path.insert(0, {root!r})
+    import engine.io
+    from engine.__main__ import main
+    real = engine.io._WRITERS["ply"]
+
+    def slow(file, *arrays):  # a write that takes long enough to be interrupted
+        file.write(b"ply\\n")
+        file.flush()
+        print("writing", flush=True)
+        for _ in range(600):
+            file.write(bytes(1000))
+            time.sleep(0.01)
+        real(file, *arrays)
+
+    engine.io._WRITERS["ply"] = slow
+    sys.exit(main(["reconstruct", {cloud!r}, {output!r}, "--resolution", "32",
+                   "--udf-source", "nearest", "--quiet"]))
+""")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_during_the_cli_write_cancels_and_keeps_the_previous_file(tmp_path, scan,
+                                                                           signum):
+    output = tmp_path / "mesh.ply"
+    write_mesh(output, Mesh(sphere(100), np.array([[0, 1, 2]])))
+    before = digest(output)
+    code = _SLOW_WRITE_CLI.format(root=str(ROOT), cloud=str(scan), output=str(output))
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "writing"
+        time.sleep(0.1)
+        child.send_signal(signum)
+        _, err = child.communicate(timeout=20)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert child.returncode == 130 and "cancelled" in err, (child.returncode, err)
+    assert "Traceback" not in err
+    assert digest(output) == before
+    assert leftovers(tmp_path) == [], "the partial temporary file is removed"
