@@ -43,7 +43,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--device", choices=DEVICES, default=defaults.device,
                         help=f"where the networks run (default {defaults.device})")
     parser.add_argument("--seed", type=int, default=defaults.seed,
-                        help=f"seed of every random choice (default {defaults.seed})")
+                        help=f"seed of the random choices, 0 to 4294967295: only the mesher "
+                             f"draws any (seed faces where it splits a double layer); every "
+                             f"other stage is deterministic, so many inputs give the same mesh "
+                             f"for every seed (default {defaults.seed})")
     parser.add_argument("--min-component-faces", type=int, default=defaults.min_component_faces,
                         help="drop output pieces with fewer faces (default 0: keep all)")
     parser.add_argument("--outliers", choices=OUTLIER_POLICIES, default=defaults.outliers,
