@@ -38,9 +38,9 @@ def main():
     gpu = resolve_device(args.device) == "cuda"
     shapes = {"sphere": A.sphere((0, 0, 0), 0.5), "disk": A.disk((0, 0, 0), 0.5)}
     header = (f"{'shape':7s} {'res':>4s} {'cover F':>9s} {'out F':>8s} {'grid s':>7s} "
-              f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'cut s':>6s} {'clean s':>7s} "
+              f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'layer s':>7s} {'clean s':>7s} "
               f"{'total s':>8s} {'cpu s':>6s} {'opt it':>6s} {'ms/it':>6s} {'py peak MB':>10s} "
-              f"{'RSS MB':>7s} {'GPU MB':>7s} status")
+              f"{'RSS MB':>7s} {'GPU MB':>7s} layers")
     print(header, flush=True)
     for res in args.res:
         for name in args.shapes:
@@ -62,11 +62,12 @@ def main():
             t = result.timings
             iters = int(result.stats.get("iterations", settings.iterations))
             rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            status = ",".join(sorted({r.status.value for r in result.components}))
+            status = (f"double_pairs={int(result.stats.get('double_pairs', 0))} "
+                      f"welded={int(result.stats.get('welded_vertices', 0))}")
             gpu_mb = torch.cuda.max_memory_allocated() / 2**20 if gpu else 0.0
             print(f"{name:7s} {res:4d} {int(result.stats['cover_faces']):9d} "
                   f"{len(result.mesh.faces):8d} {grid_s:7.1f} {t['marching_cubes']:6.2f} "
-                  f"{t.get('field', 0):7.2f} {t['optimize']:7.1f} {t['cut']:6.2f} "
+                  f"{t.get('field', 0):7.2f} {t['optimize']:7.1f} {t['layers']:7.2f} "
                   f"{t['cleanup']:7.2f} {sum(t.values()):8.1f} {cpu:6.1f} {iters:6d} "
                   f"{1e3 * t['optimize'] / max(iters, 1):6.0f} {peak / 2**20:10.0f} "
                   f"{rss:7.0f} {gpu_mb:7.0f} {status}", flush=True)

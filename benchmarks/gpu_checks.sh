@@ -4,21 +4,12 @@
 #
 #     bash benchmarks/gpu_checks.sh
 #
-# The device machine's python3 has torch (CUDA), numpy, scipy and scikit-image but not
-# PyMaxflow; carry its wheel: on this machine, once,
-#     echo /.whl/ >> .git/info/exclude
-#     python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
-#         --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux2014_x86_64 \
-#         -d .whl PyMaxflow
-# and pass carry [".whl"] to the device tool. Logs go to $OUT (the device tool's folder) or
-# out/gpu.
+# The device machine's python3 has torch (CUDA), numpy, scipy and scikit-image, all the
+# engine needs. Logs go to $OUT (the device tool's folder) or out/gpu.
 set -o pipefail
 OUT=${OUT:-out/gpu}
 mkdir -p "$OUT"
 PY=${PYTHON:-python3}
-if [ -d .whl ]; then
-    "$PY" -m pip install -q --no-index --find-links .whl PyMaxflow
-fi
 "$PY" -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available(), torch.cuda.get_device_name(0) if torch.cuda.is_available() else '')" | tee "$OUT/device.log"
 # the CUDA tests (skipped on CPU machines) and the torch/numpy agreement tests
 "$PY" -m pytest -q -rs -p no:cacheprovider tests/engine/test_meshing_torch.py \

@@ -19,7 +19,6 @@ DEPENDENCIES = (
     ("numpy", "numpy", "arrays (ships with Blender)", True),
     ("scipy", "scipy", "neighbour search", True),
     ("skimage", "scikit-image", "marching cubes", True),
-    ("maxflow", "PyMaxflow", "splitting the double surface into one layer", True),
     ("laspy", "laspy", "reading LAS/LAZ scans (optional)", False),
     ("torch", "torch", "computing on an NVIDIA GPU (optional)", False),
 )
@@ -35,7 +34,7 @@ def _found(module: str) -> bool:
 
 
 def install_name(module: str) -> str:
-    """The name users install the package that provides ``module`` by (``maxflow`` -> PyMaxflow);
+    """The name users install the package that provides ``module`` by (``skimage`` -> scikit-image);
     the top-level module name when it is not in the table."""
     top = module.split(".")[0]
     for name, distribution, _, _ in DEPENDENCIES:

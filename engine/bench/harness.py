@@ -46,6 +46,7 @@ from ..geometry import Mesh, PointCloud
 from ..metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
 
 METRIC_KEYS = ("cd_l1_x100", "cd_l2") + tuple(f1_key(t) for t in DEFAULT_THRESHOLDS) + ("nc",)
+LAYER_KEYS = ("double_layer", "gt_double_layer", "area_ratio")
 CROP_DOMAINS = ("rooms",)
 DEFAULT_CROP_MAX_DIST = 0.01
 _CLEAR_REFS = "/proc/self/clear_refs"
@@ -278,7 +279,7 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
         row.update(_worst_scores(), empty=True, pred_faces=0)
     else:
         scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible, cloud.points)
-        row.update({key: scores[key] for key in METRIC_KEYS},
+        row.update({key: scores[key] for key in METRIC_KEYS + LAYER_KEYS},
                    empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
     return row, memory.measure
 
@@ -370,6 +371,9 @@ def summarize(rows: Sequence[dict]) -> dict:
     }
     for key in METRIC_KEYS[2:]:
         summary[key] = _mean([row[key] for row in rows])
+    for key in LAYER_KEYS:  # rows scored before these metrics existed have none
+        values = [row[key] for row in scored if row.get(key) is not None]
+        summary[key] = _mean(values) if len(values) == len(scored) else None
     summary["seconds"] = _mean([row["seconds"] for row in rows])
     summary["peak_rss_mb"] = max((row["peak_rss_mb"] for row in rows), default=None)
     summary["peak_delta_mb"] = max((row["peak_delta_mb"] for row in rows), default=None)
@@ -400,8 +404,15 @@ def _fmt(value, digits: int) -> str:
 
 
 TABLE_HEADER = ("| method | domain | condition | N | failed | CD-L1 ×10² | F1@0.005 | F1@0.01 "
-                "| NC | s/shape | peak MB |\n"
-                "|---|---|---|---|---|---|---|---|---|---|---|")
+                "| NC | double % (GT %) | area ratio | s/shape | peak MB |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _layers(summary: dict) -> str:
+    """``double % (GT %)`` of a summary, ``–`` for rows scored without the layer metrics."""
+    if summary.get("double_layer") is None:
+        return "–"
+    return (f"{100 * summary['double_layer']:.1f} ({100 * summary['gt_double_layer']:.1f})")
 
 
 def table_row(result: dict) -> str:
@@ -412,7 +423,8 @@ def table_row(result: dict) -> str:
         failed += f" (+{s['empty'] - s['failed']} empty)"
     return (f"| {result['method']} | {result['domain']} | {result['condition']} | {s['n']} "
             f"| {failed} | {_fmt(s['cd_l1_x100'], 3)} | {_fmt(s[f1_key(0.005)], 3)} "
-            f"| {_fmt(s[f1_key(0.01)], 3)} | {_fmt(s['nc'], 3)} | {_fmt(s['seconds'], 1)} "
+            f"| {_fmt(s[f1_key(0.01)], 3)} | {_fmt(s['nc'], 3)} | {_layers(s)} "
+            f"| {_fmt(s.get('area_ratio'), 3)} | {_fmt(s['seconds'], 1)} "
             f"| {_fmt(s['peak_rss_mb'], 0)} |")
 
 

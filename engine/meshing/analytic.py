@@ -114,6 +114,36 @@ def t_junction(half_width: float = 0.35, depth: float = 0.35) -> Shape:
     return union(wall, fin)
 
 
+def shelf_on_wall(width: float = 0.3, height: float = 0.35, depth: float = 0.25,
+                  shelf_z: float = 0.03) -> Shape:
+    """A wall (the plane y = 0) with a narrower shelf (z = shelf_z) touching it along a line."""
+    wall = rectangle((0, 0, 0), (1, 0, 0), (0, 0, 1), width, height)
+    shelf = rectangle((0, depth / 2, shelf_z), (1, 0, 0), (0, 1, 0), 0.6 * width, depth / 2)
+    return union(wall, shelf)
+
+
+def box_surface(center=(0.0, 0.0, 0.0), half=(0.2, 0.2, 0.2)) -> Tuple[Shape, ...]:
+    """The six faces of an axis-aligned box, as rectangles."""
+    c = np.asarray(center, dtype=np.float64)
+    h = np.asarray(half, dtype=np.float64)
+    faces = []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        for sign in (-1.0, 1.0):
+            centre = c.copy()
+            centre[axis] += sign * h[axis]
+            faces.append(rectangle(centre, np.eye(3)[u], np.eye(3)[v], h[u], h[v]))
+    return tuple(faces)
+
+
+def touching_boxes(half: float = 0.15, offset=(0.011, 0.007, 0.013)) -> Shape:
+    """Two equal boxes side by side sharing one face (the shared face counts once)."""
+    o = np.asarray(offset, dtype=np.float64)
+    left = box_surface(o + (-half, 0, 0), (half, half, half))
+    right = box_surface(o + (half, 0, 0), (half, half, half))
+    return union(*left, *right[1:])  # right[0] is the face at x = 0, left[1] already has it
+
+
 def mobius(radius: float = 0.35, half_width: float = 0.15, spacing: float = 0.002) -> Shape:
     """A Möbius strip around the z axis, represented by dense samples (``spacing`` apart).
 

@@ -1,12 +1,12 @@
 """Entry point of the mesher: a UDF grid in, a one-layer triangle mesh out (DCUDF).
 
 Stages: marching cubes at a small iso-value r (the double cover) → covering-map optimisation
-onto the zero set → min-cut into one layer per piece → clean-up. See the modules of this package
-for each stage.
+onto the zero set → one layer chosen over the whole cover, seams welded (:mod:`.layers`) →
+clean-up. See the modules of this package for each stage.
 """
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -16,8 +16,8 @@ from ..errors import InputError
 from ..geometry import Mesh
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .cleanup import clean_mesh
-from .cut import ComponentRecord, Status, split_cover
 from .grid_field import UDFGrid
+from .layers import choose_layer, close_pinholes, drop_flaps, extend_rims, weld_seams
 from .marching import double_cover
 from .optimize import optimize_cover
 
@@ -36,9 +36,9 @@ class MeshingSettings:
         field, higher resists noise).
     lr: peak step of VectorAdam, voxels per iteration.
     normal_start: fraction of the iterations after which stage 2 (normal-constrained) starts.
-    cut: split the double cover into one layer (False keeps both layers).
+    cut: keep one layer of the double cover (False keeps both layers).
     min_component_faces: drop output pieces with fewer faces (0 keeps everything).
-    seed: seeds the min-cut's seed faces.
+    seed: kept for reproducible settings; the layer choice itself draws no random numbers.
     device: ``auto``, ``cpu`` or ``cuda``: where the optimisation runs. ``cuda`` (and ``auto``
         when PyTorch sees a GPU) runs it in torch on the GPU; ``cpu`` in numpy (faster on a CPU
         than torch: 6.4 s vs 14.7 s for the sphere at 128 on 2 cores). The other stages run on
@@ -78,30 +78,16 @@ class MeshingSettings:
 class MeshingResult:
     """The mesh and what happened on the way.
 
-    mesh: the one-layer mesh (world units); components: one record per piece of the cover
-    (status, faces kept, cover faces, detail), largest first; iso: the level used (world units);
-    timings: seconds per stage; messages: warnings meant for the user; stats: numbers for logs.
+    mesh: the one-layer mesh (world units); iso: the level used (world units); timings: seconds
+    per stage; messages: what a user can act on, in plain words; stats: numbers for logs (the
+    mesher's details: cover pieces, twins, trees, seams welded, pairs left double).
     """
 
     mesh: Mesh
-    components: List[ComponentRecord]
     iso: float
     timings: Dict[str, float] = field(default_factory=dict)
     messages: List[str] = field(default_factory=list)
     stats: Dict[str, float] = field(default_factory=dict)
-
-
-def _summary(records: List[ComponentRecord]) -> List[str]:
-    messages = []
-    bad = [r for r in records if r.status == Status.NOT_ORIENTABLE]
-    if bad:
-        messages.append(f"{len(bad)} component{'s' if len(bad) > 1 else ''} could not be split "
-                        "into one layer (not orientable or non-manifold); kept double-layered")
-    failed = [r for r in records if r.status == Status.FAILED]
-    if failed:
-        messages.append(f"{len(failed)} component{'s' if len(failed) > 1 else ''} could not be "
-                        f"processed ({failed[0].detail}); kept as extracted")
-    return messages
 
 
 def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
@@ -141,11 +127,12 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     stats = {"iso_voxels": iso / h, "cover_vertices": len(verts), "cover_faces": len(faces),
              "cover_pieces": report.components}
     if len(faces) == 0:
-        return MeshingResult(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), [], iso,
+        return MeshingResult(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), iso,
                              timings, messages + ["no surface found"], stats)
 
     start = time.perf_counter()
     check_cancel(cancel)
+    cover_start = verts.copy()
     if field.exact is None:
         bricks = field.prepare(iso + 3.0 * h)
         stats["field_bricks"] = bricks
@@ -170,24 +157,28 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
                   "max_distance_voxels": opt.max_distance, "iterations": opt.iterations})
 
     start = time.perf_counter()
-    keep, records = split_cover(verts, faces, h, settings.cut, settings.seed,
-                                sub_progress(progress, 0.9, 0.97), cancel)
-    timings["cut"] = time.perf_counter() - start
-    messages += _summary(records)
+    progress(0.9, "choosing one layer")
+    if settings.cut:
+        keep, _, _, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
+        kept, welded = weld_seams(verts, faces[keep], h)
+        kept, flaps = drop_flaps(kept)
+        kept, closed = close_pinholes(kept)
+        verts = extend_rims(verts, kept, field, h)
+        stats.update({"twinned_faces": layer.twins, "layer_trees": layer.trees,
+                      "double_pairs": layer.double_pairs, "welded_vertices": welded,
+                      "flaps_dropped": flaps, "pinholes_closed": closed})
+    else:
+        kept = faces
+    timings["layers"] = time.perf_counter() - start
 
     start = time.perf_counter()
     check_cancel(cancel)
-    out_v, out_f, counts = clean_mesh(verts, faces[keep], h, settings.min_component_faces)
+    out_v, out_f, counts = clean_mesh(verts, kept, h, settings.min_component_faces)
     timings["cleanup"] = time.perf_counter() - start
     stats.update({f"cleanup_{k}": v for k, v in counts.items()})
     if counts["small_pieces"]:
         messages.append(f"{counts['small_pieces']} pieces with fewer than "
                         f"{settings.min_component_faces} faces were removed")
     progress(1.0, "meshing done")
-    return MeshingResult(Mesh(out_v, out_f.astype(np.int64)), records, iso, timings, messages,
-                         stats)
+    return MeshingResult(Mesh(out_v, out_f.astype(np.int64)), iso, timings, messages, stats)
 
-
-def settings_dict(settings: MeshingSettings) -> dict:
-    """The settings as a plain dict (for logs and the CLI)."""
-    return asdict(settings)

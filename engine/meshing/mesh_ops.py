@@ -159,11 +159,18 @@ def vertex_fans(n: int, faces: np.ndarray, topo: EdgeTopology = None):
 
 
 def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray):
-    """Give every fan of a non-manifold vertex its own copy of the vertex.
+    """Give every fan of a non-manifold vertex (a bow-tie) its own copy of the vertex.
+
+    Vertices on an edge shared by more than two faces (a junction where a shelf meets a wall)
+    stay joined: the junction is part of the surface.
 
     Returns new (vertices, faces); manifold meshes come back unchanged (as copies).
     """
-    labels, fans = vertex_fans(len(vertices), faces)
+    topo = edge_topology(faces)
+    labels, fans = vertex_fans(len(vertices), faces, topo)
+    junction = np.zeros(len(vertices), bool)
+    junction[topo.edges[topo.counts > 2].reshape(-1)] = True
+    fans[junction] = 1
     if not np.any(fans > 1):
         return vertices.copy(), faces.copy()
     fan_ids, first = np.unique(labels.reshape(-1), return_index=True)
@@ -177,9 +184,13 @@ def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray):
     extra = order[~is_first]
     new_index[extra] = len(vertices) + np.arange(len(extra))
     out_vertices = np.concatenate([vertices, vertices[fan_vertex[extra]]])
+    at_junction = junction[fan_vertex]
+    new_index[at_junction] = fan_vertex[at_junction]
     lookup = np.empty(labels.max() + 1, dtype=np.int64)
     lookup[fan_ids] = new_index
-    return out_vertices, lookup[labels]
+    out_faces = lookup[labels]
+    out_vertices, out_faces, _ = remove_unreferenced(out_vertices, out_faces)
+    return out_vertices, out_faces
 
 
 def remove_unreferenced(vertices: np.ndarray, faces: np.ndarray):

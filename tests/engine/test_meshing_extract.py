@@ -1,4 +1,5 @@
-"""End to end on analytic fields: distance to the true surface, pieces, loops, manifoldness."""
+"""End to end on analytic fields: distance to the true surface, pieces, loops, manifoldness, and
+one layer everywhere (the double-layered share of the area and the area against the truth)."""
 
 from functools import lru_cache
 
@@ -9,7 +10,7 @@ from engine.errors import Cancelled
 from engine.meshing import MeshingSettings, UDFGrid, extract_surface
 from engine.meshing import analytic as A
 from engine.meshing import mesh_ops as mo
-from engine.meshing.cut import Status
+from engine.metrics import double_layer_share
 
 RES = 64
 H = 1.0 / (RES - 1)  # voxel size over [-0.5, 0.5]
@@ -27,7 +28,22 @@ def shapes():
         "two_disks": A.union(A.disk((-0.15, 0, 0.003), 0.3), A.disk((0.3, 0.3, 0.01), 0.03)),
         "mobius": A.mobius(0.3, 0.12, spacing=H / 6),
         "t_junction": A.t_junction(0.3, 0.3),
+        "shelf": A.shelf_on_wall(0.3, 0.35, 0.25),
+        "boxes": A.touching_boxes(0.15),
     }
+
+
+TRUE_AREA = {"disk": np.pi * 0.09, "square": 0.36, "hemisphere": 2 * np.pi * 0.09,
+             "t_junction": 0.6 * 0.6 + 0.3 * 0.6, "shelf": 0.6 * 0.7 + 0.36 * 0.25,
+             "boxes": 11 * 0.3 ** 2, "mobius": 2 * np.pi * 0.3 * 0.24}
+
+
+def area(mesh):
+    return float(mo.face_normals(mesh.vertices, mesh.faces)[1].sum())
+
+
+def double_share(mesh):
+    return double_layer_share(mesh.vertices, mesh.faces, H)
 
 
 @lru_cache(maxsize=None)
@@ -62,7 +78,7 @@ def test_closed_shapes(name, chi):
     assert s["components"] == 1 and s["loops"] == 0
     assert s["nonmanifold_edges"] == 0 and s["nonmanifold_vertices"] == 0
     assert mo.euler_characteristic(mesh.faces) == chi
-    assert [r.status for r in result.components] == [Status.CLOSED_PAIR]
+    assert double_share(mesh) == 0.0
     d = shape(mesh.vertices)[0] / H
     assert d.mean() < 0.05 and d.max() < 0.3
     centroids = mesh.vertices[mesh.faces].mean(axis=1)
@@ -103,39 +119,35 @@ def test_open_shapes_one_layer(name):
     shape, result = run(name)
     mesh = result.mesh
     s = summary(mesh)
-    assert [r.status for r in result.components] == [Status.SPLIT]
-    assert s["components"] == 1 and s["loops"] == 1
-    assert s["nonmanifold_edges"] == 0 and s["nonmanifold_vertices"] == 0
-    assert mo.euler_characteristic(mesh.faces) == 1  # a disk: no double layer, no holes
-    cover = result.components[0].cover_faces
-    assert 0.4 < len(mesh.faces) / cover < 0.6
+    _, face_area = mo.face_normals(mesh.vertices, mesh.faces)
+    assert np.bincount(s["labels"], weights=face_area).max() > 0.995 * face_area.sum()  # one piece
+    assert double_share(mesh) < 0.01  # one layer: no opposite-facing sheet within a voxel
+    assert 0.93 < area(mesh) / TRUE_AREA[name] < 1.02  # not doubled, rims not far retracted
     d = shape(mesh.vertices)[0] / H
-    assert d.mean() < 0.05 and d.max() < 0.5
+    assert d.mean() < 0.05 and d.max() < 0.8
     rim = mesh.vertices[s["boundary_vertices"]]
     assert rim_distance(name, rim).max() < 2.0  # every boundary vertex is near the true rim
     from scipy.spatial import cKDTree
     gap, _ = cKDTree(rim).query(rim_points(name))
     assert gap.max() / H < 2.5  # and the whole true rim is followed
-    # no double layer: no face sits on top of another with the opposite normal
-    normals, _ = mo.face_normals(mesh.vertices, mesh.faces)
-    cents = mesh.vertices[mesh.faces].mean(axis=1)
-    tree = cKDTree(cents)
-    pairs = tree.query_pairs(0.3 * H, output_type="ndarray")
-    opposite = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) < -0.5
-    assert opposite.sum() <= 0.01 * len(mesh.faces)
-    assert face_quality(mesh)[1]
+    # the rim is one loop, maybe pinched at a few vertices: no other long boundary
+    assert s["loops"] <= 30
+    # wound consistently, but for a few faces welded near the rim
+    directed = np.stack([mesh.faces, np.roll(mesh.faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    _, counts = np.unique(directed, axis=0, return_counts=True)
+    assert (counts > 1).sum() <= 0.005 * len(mesh.faces)
 
 
 def test_two_close_sheets_stay_separate():
     _, result = run("sheets")
     mesh = result.mesh
     s = summary(mesh)
-    assert [r.status for r in result.components] == [Status.SPLIT, Status.SPLIT]
-    assert s["components"] == 2 and s["loops"] == 2
+    assert s["components"] == 2
     for k in range(2):
         z = mesh.vertices[np.unique(mesh.faces[s["labels"] == k]), 2]
         assert np.ptp(z) < 0.2 * H  # each piece is flat, on one of the sheets
         assert abs(abs(z.mean()) - 1.5 * H) < 0.05 * H
+    assert 0.9 < area(mesh) / (2 * 0.36) < 1.02
 
 
 def test_small_disk_is_kept():
@@ -146,20 +158,44 @@ def test_small_disk_is_kept():
     centres = np.array([mesh.vertices[np.unique(mesh.faces[s["labels"] == k])].mean(axis=0)
                         for k in range(2)])
     assert np.min(np.linalg.norm(centres - [0.3, 0.3, 0.01], axis=1)) < 2 * H
-    big = result.components[0]
-    assert big.status == Status.SPLIT and big.cover_faces > 10 * result.components[1].cover_faces
+    assert double_share(mesh) < 0.01
 
 
-@pytest.mark.parametrize("name", ["mobius", "t_junction"])
-def test_non_orientable_or_non_manifold_flagged(name):
+@pytest.mark.parametrize("name,limit", [("t_junction", 0.02), ("shelf", 0.03), ("boxes", 0.05),
+                                        ("mobius", 0.05)])
+def test_non_manifold_and_non_orientable_come_out_single_layered(name, limit):
+    """A T-junction, a shelf touching a wall, two boxes sharing a face, a Möbius strip: the
+    min-cut of DCUDF keeps both layers of these; here one layer remains, the surface's area
+    once. Within a voxel of a junction the welded faces turn, and a Möbius strip cannot be
+    wound consistently (along its seam the faces on either side face opposite ways): both read
+    as a little double area at this coarse grid (19 voxels per box side), hence the limits; a
+    kept double layer would read as about half of the area.)"""
     shape, result = run(name)
-    statuses = {r.status for r in result.components}
-    assert statuses & {Status.NOT_ORIENTABLE, Status.FAILED}
-    assert result.messages  # the user is told
     mesh = result.mesh
-    assert len(mesh.faces) > 0
+    assert double_share(mesh) < limit
+    assert 0.93 < area(mesh) / TRUE_AREA[name] < 1.03
     d = shape(mesh.vertices)[0] / H
-    assert np.median(d) < 0.1  # the kept double layer still lies on the surface
+    assert np.median(d) < 0.1 and np.mean(d) < 0.15
+    # the whole surface is covered: every point of the truth is near the mesh
+    from scipy.spatial import cKDTree
+    truth = shape(np.random.default_rng(0).uniform(-0.45, 0.45, (20000, 3)))[1]
+    gap, _ = cKDTree(mesh.vertices).query(truth)
+    assert np.quantile(gap / H, 0.99) < 2.0
+    assert not result.messages  # nothing a user has to act on
+
+
+def test_fragmented_cover_comes_out_single_layered():
+    """A noisy field fragments the double cover (pieces, handles); one layer still remains."""
+    shape = A.disk((0, 0, 0.004), 0.3)
+    grid = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, RES, exact=False)
+    udf = grid.slab(0, grid.shape[0])
+    noise = np.random.default_rng(3).uniform(-0.45, 0.45, udf.shape) * H
+    noisy = UDFGrid(np.abs(udf + noise), grid.origin, H)
+    result = extract_surface(noisy, MeshingSettings(iso=0.7 * H))
+    assert result.stats["cover_pieces"] > 1  # the cover did fragment
+    mesh = result.mesh
+    assert double_share(mesh) < 0.01
+    assert 0.85 < area(mesh) / TRUE_AREA["disk"] < 1.05
 
 
 def test_same_seed_same_mesh_and_band_input():
@@ -182,7 +218,7 @@ def test_exact_callable_and_timings():
                              progress=lambda f, m: seen.append(f))
     d = shape(result.mesh.vertices)[0] / grid.spacing
     assert d.mean() < 0.05 and d.max() < 0.3
-    assert set(result.timings) >= {"marching_cubes", "optimize", "cut", "cleanup"}
+    assert set(result.timings) >= {"marching_cubes", "optimize", "layers", "cleanup"}
     assert seen and seen[-1] == 1.0 and all(0 <= f <= 1 for f in seen)
     assert result.iso == pytest.approx(grid.spacing)
 
@@ -202,5 +238,5 @@ def test_cancel_is_honoured():
 def test_no_cut_keeps_double_layer():
     grid = A.sample_grid(A.disk((0, 0, 0), 0.3), [-0.5] * 3, [0.5] * 3, 40, exact=False)
     result = extract_surface(grid, MeshingSettings(cut=False, iterations=100))
-    assert [r.status for r in result.components] == [Status.UNCUT]
     assert summary(result.mesh)["loops"] == 0  # the closed pancake
+    assert double_share(result.mesh) > 0.9

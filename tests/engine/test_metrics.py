@@ -176,7 +176,8 @@ def test_cli_prints_one_json_object(tmp_path, capsys):
     assert main(["metrics", str(pred), str(gt), "--samples", "20000", "--seed", "1"]) == 0
     out = capsys.readouterr().out
     result = json.loads(out)  # the whole of stdout is one JSON object
-    assert set(result) == set(KEYS) | {"empty", "samples", "pred_faces"}
+    assert set(result) == set(KEYS) | {"empty", "samples", "pred_faces", "double_layer",
+                                        "gt_double_layer", "area_ratio"}
     assert result["cd_l1_x100"] == pytest.approx(2.0, rel=0.03)
     assert result["samples"] == 20000 and result["empty"] is False
 
@@ -185,3 +186,33 @@ def test_cli_prints_one_json_object(tmp_path, capsys):
     assert main(["metrics", str(empty), str(gt), "--samples", "1000"]) == 0
     result = json.loads(capsys.readouterr().out)  # strict JSON: inf is written as null
     assert result["cd_l1_x100"] is None and result["empty"] is True and result["f1_0.01"] == 0.0
+
+
+def _sphere(radius=0.3, n=48):
+    from skimage.measure import marching_cubes
+
+    g = np.linspace(-0.5, 0.5, n)
+    x, y, z = np.meshgrid(g, g, g, indexing="ij")
+    v, f, _, _ = marching_cubes(np.sqrt(x ** 2 + y ** 2 + z ** 2) - radius, 0.0,
+                                spacing=(g[1] - g[0],) * 3)
+    return v - 0.5, f.astype(np.int64)
+
+
+def test_double_layer_share_sees_a_second_layer():
+    """A second, opposite-facing copy on top of a sphere doubles the area and reads as 100 %
+    double-layered; CD cannot tell. One layer reads 0 %, two spheres a voxel-and-a-half
+    apart read 0 % at a one-voxel distance."""
+    from engine.metrics import double_layer_share
+
+    v, f = _sphere()
+    assert double_layer_share(v, f, 1 / 128) == 0.0
+    twin = (np.vstack([v, v * 1.002]), np.vstack([f, f[:, ::-1] + len(v)]))
+    assert double_layer_share(*twin, 1 / 128) > 0.99
+    apart = (np.vstack([v, v * (1 + 1.5 / 128 / 0.3)]), np.vstack([f, f[:, ::-1] + len(v)]))
+    assert double_layer_share(*apart, 1 / 128) < 0.01
+    scores = evaluate(Mesh(*twin), Mesh(v, f), samples=20000, layer_distance=1 / 64)
+    assert scores["area_ratio"] == pytest.approx(2.0, rel=0.01)
+    assert scores["double_layer"] > 0.99 and scores["gt_double_layer"] == 0.0
+    single = evaluate(Mesh(v, f), Mesh(v, f), samples=20000, layer_distance=1 / 64)
+    assert single["double_layer"] == 0.0 and single["area_ratio"] == pytest.approx(1.0)
+    assert scores["cd_l1_x100"] < 1.2 * single["cd_l1_x100"]  # CD is blind to it

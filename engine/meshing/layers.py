@@ -1,0 +1,499 @@
+"""Keep one layer of the optimised double cover, everywhere.
+
+After the optimisation both layers of the cover lie on the surface S, facing opposite ways: every
+face of one layer has a *twin* of the other layer on top of it. One face of every twin pair has to
+go, and neighbouring faces should make the same choice. That is a labelling with two kinds of
+constraints on the faces:
+
+* twins get **opposite** labels (one kept, one dropped);
+* faces that share an edge get the **same** label, the more firmly the flatter the join.
+
+On an orientable sheet the constraints agree. Where they cannot all hold (a Möbius strip, a
+T-junction where three half-sheets meet, a shelf touching a wall, touching parts) the weakest
+ones give way. The labelling is the parity along a minimum spanning forest of the constraint
+graph (Kruskal on a signed graph): twin constraints first, then shared edges from flat to
+folded, so the choice switches layers across creases and folds, and across a flat area only
+where the topology leaves no other way. The min-cut of DCUDF, one balanced bipartition per
+piece, refuses those pieces and keeps both layers; this does not.
+
+Per tree, the label whose faces had the larger area *before* the optimisation is kept: the outer
+shell of a closed surface (its cover's outer layer is the larger), either side of an open sheet.
+Where the choice switches layers the kept faces end in a *seam*: a boundary lying on other kept
+faces. Seam vertices are welded onto the nearest kept vertex that is not their own neighbour; a
+rim has nothing kept beside it and stays open.
+
+Twins are matched geometrically (the two layers' triangulations differ): an opposite-facing face
+(normals more than about 150 degrees apart: a crease face at a junction is no twin) whose centroid lies within ``TWIN_LATERAL`` voxels of the
+face's normal line, on top of it or behind it (up to twice the iso-value: layers that did not
+fully meet). A pair that is not coincident is accepted only when the field has no bump between
+them: two distinct sheets a little apart (a thin part) have ``d > 0`` midway, the two layers of
+one sheet have the sheet between them.
+"""
+
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+import numpy as np
+
+from ..progress import CancelFn, check_cancel
+from . import mesh_ops
+
+OPPOSITE_COS = -0.85  # twins' normals are more than about 150 degrees apart
+TWIN_LATERAL = 0.8  # voxels from the face's normal line
+COINCIDENT = 0.25  # voxels along the normal: closer pairs need no field test
+BUMP = 0.25  # a field bump of this share of the pair's distance (or 0.05 voxel) parts two sheets
+STANDOFF = 0.3  # ... and one of the pair must stand off the surface by this share of the gap
+WELD_RADIUS = 0.75  # voxels: a seam vertex joins a kept vertex this close
+WELD_RINGS = 3  # ... that is not within this many edges of it
+SHEET_COS = 0.5  # ... and whose sheet's normal is more than 60 degrees from the vertex's own
+_NEIGHBOURS = 12
+
+
+@dataclass
+class LayerReport:
+    """What the layer choice did.
+
+    twins: faces with a twin; trees: independent choices (pieces of the constraint forest);
+    conflicts: twin pairs that kept both faces (still double) and the area share of their faces;
+    welded: seam vertices joined to another sheet.
+    """
+
+    twins: int
+    trees: int
+    double_pairs: int
+    welded: int
+
+
+def _candidates(tree, cents, normals, query, probe, k):
+    """Opposite-facing faces near ``probe`` points: (face, candidate, depth, lateral) arrays."""
+    k = min(k, len(cents))
+    dist, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT)
+    idx = idx.reshape(len(query), k)
+    valid = idx < len(cents)
+    rows, cols = np.nonzero(valid)
+    f, g = query[rows], idx[rows, cols]
+    opposite = np.einsum("ij,ij->i", normals[f], normals[g]) < OPPOSITE_COS
+    f, g = f[opposite], g[opposite]
+    offset = cents[g] - cents[f]
+    depth = np.einsum("ij,ij->i", offset, normals[f])  # > 0: g in front of f
+    lateral = np.linalg.norm(offset - depth[:, None] * normals[f], axis=1)
+    return f, g, depth, lateral
+
+
+def _one_sheet_between(field, spacing, x_f, x_g):
+    """True where two faces apart (voxel coordinates) are the two layers of one sheet.
+
+    Layers that did not meet stand off the surface (at least one has a distance of a good part
+    of the gap) with the surface between them (no bump of the field midway); two converged
+    faces apart are two sheets.
+    """
+    u_f, _ = field.closest(x_f * spacing)
+    u_g, _ = field.closest(x_g * spacing)
+    u_m, _ = field.closest(0.5 * (x_f + x_g) * spacing)
+    gap = np.linalg.norm(x_g - x_f, axis=1)
+    high = np.maximum(u_f, u_g) / spacing
+    bump = u_m / spacing - high
+    return (bump <= np.maximum(BUMP * gap, 0.05)) & (high >= STANDOFF * gap)
+
+
+def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
+               max_depth: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Twin pairs of the cover (face indices f < g) and how far apart they are.
+
+    Parameters
+    ----------
+    cents, normals : (m, 3) face centroids (voxel units) and unit normals.
+    field : UDFGrid or None (None: no field test; only coincident pairs are twins).
+    spacing : voxel size, world units (to query the field).
+    max_depth : voxels; how far behind a face its twin may lie.
+
+    Returns
+    -------
+    f, g : (P,) int64; gap : (P,) float64 voxels.
+    """
+    from scipy.spatial import cKDTree
+
+    m = len(cents)
+    if m < 2:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, np.zeros(0)
+    tree = cKDTree(cents)
+    found_f, found_g, found_gap = [], [], []
+    unmatched = np.arange(m)
+    depth_probe = 0.0
+    while len(unmatched) and depth_probe <= max_depth + 1e-9:
+        probe = cents[unmatched] - depth_probe * normals[unmatched]
+        f, g, depth, lateral = _candidates(tree, cents, normals, unmatched, probe, _NEIGHBOURS)
+        behind = -depth
+        near = (lateral < TWIN_LATERAL) & (behind > -COINCIDENT) & (behind < max_depth)
+        f, g, behind = f[near], g[near], behind[near]
+        test = np.abs(behind) > COINCIDENT
+        if field is not None and test.any():
+            ok = np.ones(len(f), bool)
+            ok[test] = _one_sheet_between(field, spacing, cents[f[test]], cents[g[test]])
+            f, g, behind = f[ok], g[ok], behind[ok]
+        elif field is None:
+            f, g, behind = f[~test], g[~test], behind[~test]
+        found_f.append(f)
+        found_g.append(g)
+        found_gap.append(np.abs(behind))
+        matched = np.zeros(m, bool)
+        matched[f] = True
+        unmatched = unmatched[~matched[unmatched]]
+        depth_probe += 1.0
+    f = np.concatenate(found_f)
+    g = np.concatenate(found_g)
+    gap = np.concatenate(found_gap)
+    lo, hi = np.minimum(f, g), np.maximum(f, g)
+    key = lo * m + hi
+    key, first = np.unique(key, return_index=True)
+    return lo[first], hi[first], gap[first]
+
+
+def _parity_forest(m: int, a: np.ndarray, b: np.ndarray, weight: np.ndarray,
+                   opposite: np.ndarray):
+    """Minimum spanning forest of the signed graph and each node's parity along it.
+
+    Returns (parity (m,) bool, tree label (m,) int, tree count).
+    """
+    from scipy import sparse
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((weight, hi, lo))  # per pair, the lightest (firmest) constraint first
+    lo, hi, weight, opposite = lo[order], hi[order], weight[order], opposite[order]
+    first = np.ones(len(lo), bool)
+    first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
+    lo, hi, weight, opposite = lo[first], hi[first], weight[first], opposite[first]
+    # the sign travels in the weight's parity bit: opposite constraints get an odd integer rank
+    rank = np.empty(len(weight), np.int64)
+    rank[np.argsort(weight, kind="stable")] = np.arange(len(weight))
+    coded = 2 * rank + 2 + opposite.astype(np.int64)
+    graph = sparse.coo_matrix((coded.astype(np.float64), (lo, hi)), shape=(m, m)).tocsr()
+    forest = minimum_spanning_tree(graph).tocoo()
+    count, labels = connected_components(forest, directed=False)
+    # a virtual root joined to one face of every tree: one breadth-first search for all
+    roots = np.unique(labels, return_index=True)[1]
+    rows = np.concatenate([forest.row, np.full(len(roots), m)])
+    cols = np.concatenate([forest.col, roots])
+    sign = np.concatenate([forest.data.astype(np.int64) % 2, np.zeros(len(roots), np.int64)])
+    tree = sparse.coo_matrix((sign + 1, (rows, cols)), shape=(m + 1, m + 1)).tocsr()
+    tree = tree + tree.T
+    order, pred = breadth_first_order(tree, m, directed=False, return_predecessors=True)
+    pred = pred[:m].copy()
+    flip = np.zeros(m + 1, np.int8)
+    child = order[order < m]
+    flip[child] = (np.asarray(tree[pred[child], child]).ravel() - 1).astype(np.int8)
+    # parity = XOR of the flips on the path to the root, by pointer jumping
+    up = np.append(pred, m)
+    up[up < 0] = m
+    parity = flip.copy()
+    while True:
+        parent = up[up]
+        if np.array_equal(parent, up):
+            break
+        parity ^= np.where(up < m, parity[up], 0).astype(np.int8)
+        up = parent
+    parity ^= np.where(up < m, parity[up], 0).astype(np.int8)
+    return parity[:m].astype(bool), labels, count
+
+
+def _broad(mask: np.ndarray, pairs: np.ndarray, m: int, rings: int = 2) -> np.ndarray:
+    """The faces of ``mask`` in regions more than ``rings`` faces wide (a morphological opening
+    over the faces' edge adjacency): a thin part's untwinned side, not the strip of fold faces
+    along a rim."""
+    from scipy import sparse
+
+    adj = sparse.coo_matrix((np.ones(2 * len(pairs)), (np.r_[pairs[:, 0], pairs[:, 1]],
+                                                       np.r_[pairs[:, 1], pairs[:, 0]])),
+                            shape=(m, m)).tocsr()
+    core = mask.copy()
+    for _ in range(rings):
+        core &= (adj @ (~core).astype(np.float64)) == 0
+    for _ in range(rings):
+        core |= mask & ((adj @ core.astype(np.float64)) > 0)
+    return core
+
+
+def _drop_kept_twins(keep: np.ndarray, twin_f: np.ndarray, twin_g: np.ndarray,
+                     pairs: np.ndarray) -> None:
+    """Where the forest left both faces of a twin pair kept, drop the one with fewer kept
+    neighbours (in place): the pair lies on a seam, and its less attached face is the stray."""
+    both = keep[twin_f] & keep[twin_g]
+    if not both.any():
+        return
+    attached = np.bincount(pairs[keep[pairs[:, 1]], 0], minlength=len(keep))
+    attached += np.bincount(pairs[keep[pairs[:, 0]], 1], minlength=len(keep))
+    f, g = twin_f[both], twin_g[both]
+    keep[np.where(attached[f] < attached[g], f, g)] = False
+
+
+def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spacing: float,
+                 field=None, iso: float = 1.0, cancel: Optional[CancelFn] = None):
+    """Choose the faces of the optimised cover that make one layer.
+
+    Parameters
+    ----------
+    start : (n, 3) float64, the cover's vertices before the optimisation (world units).
+    vertices : (n, 3) float64, after it; faces : (m, 3) int64.
+    spacing : voxel size, world units.
+    field : UDFGrid or None, the distance field (tells a thin part from two layers of a sheet).
+    iso : the marching-cubes level in voxels (layers that did not meet lie up to 2 iso apart).
+
+    Returns
+    -------
+    keep : (m,) bool; twin_f, twin_g : (P,) int64 twin pairs; report : LayerReport.
+    """
+    m = len(faces)
+    if m == 0:
+        empty = np.zeros(0, np.int64)
+        return np.zeros(0, bool), empty, empty, LayerReport(0, 0, 0, 0)
+    x = vertices / spacing
+    normals, _ = mesh_ops.face_normals(x, faces)
+    _, start_area = mesh_ops.face_normals(start / spacing, faces)
+    cents = x[faces].mean(axis=1)
+    twin_f, twin_g, gap = find_twins(cents, normals, field, spacing, 2.0 * iso + 0.5)
+    check_cancel(cancel)
+    pairs, _ = mesh_ops.dual_edges(faces)
+    cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
+    a = np.concatenate([twin_f, pairs[:, 0]])
+    b = np.concatenate([twin_g, pairs[:, 1]])
+    # twins first (closest first), then shared edges from flat (cos 1) to folded (cos -1)
+    weight = np.concatenate([0.1 * gap / (1.0 + gap), 2.0 - cos])
+    opposite = np.concatenate([np.ones(len(twin_f), bool), np.zeros(len(pairs), bool)])
+    parity, labels, count = _parity_forest(m, a, b, weight, opposite)
+    check_cancel(cancel)
+    area_odd = np.bincount(labels, weights=start_area * parity, minlength=count)
+    area_even = np.bincount(labels, weights=start_area * ~parity, minlength=count)
+    keep = parity == (area_odd > area_even)[labels]
+    _drop_kept_twins(keep, twin_f, twin_g, pairs)
+    twinned = np.zeros(m, bool)
+    twinned[twin_f] = twinned[twin_g] = True
+    keep[_broad(~twinned, pairs, m)] = True  # the only cover of its part (a thin part's side)
+    double = keep[twin_f] & keep[twin_g]
+    return keep, twin_f, twin_g, LayerReport(int(twinned.sum()), int(count), int(double.sum()), 0)
+
+
+def _rings(n: int, faces: np.ndarray, rows: np.ndarray, rings: int):
+    """For vertices ``rows``, the sparse (len(rows), n) pattern of vertices within ``rings``."""
+    from scipy import sparse
+
+    topo = mesh_ops.edge_topology(faces)
+    e = topo.edges
+    adj = sparse.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]],
+                                                   np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    adj = (adj + sparse.identity(n)).tocsr()
+    reach = adj[rows]
+    for _ in range(rings - 1):
+        reach = reach @ adj
+        reach.data[:] = 1.0
+    return reach.tocsr()
+
+
+def _vertex_normals(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (zero for unused vertices)."""
+    normals, areas = mesh_ops.face_normals(x, faces)
+    out = np.zeros_like(x)
+    for k in range(3):
+        np.add.at(out, faces[:, k], normals * areas[:, None])
+    norm = np.linalg.norm(out, axis=1)
+    return out / np.maximum(norm, 1e-300)[:, None]
+
+
+def weld_seams(vertices: np.ndarray, faces: np.ndarray, spacing: float):
+    """Join the seams of the kept faces: boundary vertices lying on another kept sheet.
+
+    A boundary vertex is moved onto the nearest vertex of the kept mesh within ``WELD_RADIUS``
+    voxels that is more than ``WELD_RINGS`` edges away from it along the mesh and on a sheet
+    turned more than 60 degrees from its own (so a rim, whose only close vertices are its own
+    sheet's, stays as it is). Faces that collapse are dropped,
+    duplicates kept once.
+
+    Returns (faces (m', 3) int64 into the same vertices, welded vertex count).
+    """
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if len(faces) == 0:
+        return faces, 0
+    n = len(vertices)
+    topo = mesh_ops.edge_topology(faces)
+    boundary = np.unique(topo.edges[topo.counts == 1])
+    if len(boundary) == 0:
+        return faces, 0
+    used = np.unique(faces)
+    x = vertices / spacing
+    tree = cKDTree(x[used])
+    k = min(8, len(used))
+    dist, idx = tree.query(x[boundary], k=k, distance_upper_bound=WELD_RADIUS)
+    dist, idx = dist.reshape(len(boundary), k), idx.reshape(len(boundary), k)
+    valid = idx < len(used)
+    target = np.where(valid, used[np.minimum(idx, len(used) - 1)], -1)
+    reach = _rings(n, faces, boundary, WELD_RINGS)
+    rows = np.repeat(np.arange(len(boundary)), k)
+    cols = target.reshape(-1)
+    ok = valid.reshape(-1)
+    own = np.zeros(len(cols), bool)
+    own[ok] = np.asarray(reach[rows[ok], cols[ok]]).ravel() > 0
+    ok &= ~own
+    # ... and whose sheet turns away from the vertex's own (a wall at a junction, the other layer
+    # at a flip seam); a crowded rim only meets its own, parallel sheet
+    normal = _vertex_normals(x, faces)
+    ok[ok] = np.einsum("ij,ij->i", normal[boundary[rows[ok]]], normal[cols[ok]]) < SHEET_COS
+    ok = ok.reshape(len(boundary), k)
+    has = ok.any(axis=1)
+    best = np.argmax(ok, axis=1)  # nearest first
+    src = boundary[has]
+    dst = target[np.nonzero(has)[0], best[has]]
+    if len(src) == 0:
+        return faces, 0
+    merge = sparse.coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
+    _, group = connected_components(merge, directed=False)
+    # every group moves to its lowest vertex index (deterministic)
+    rep = np.full(group.max() + 1, n, np.int64)
+    np.minimum.at(rep, group, np.arange(n))
+    new = rep[group][faces]
+    alive = (new[:, 0] != new[:, 1]) & (new[:, 1] != new[:, 2]) & (new[:, 0] != new[:, 2])
+    new = new[alive]
+    key = np.sort(new, axis=1)
+    _, first = np.unique(key, axis=0, return_index=True)
+    new = new[np.sort(first)]
+    return new, int(len(src))
+
+
+RIM_PROBE = 2.0  # voxels beyond a rim vertex where the field is asked for the rim
+TURN_COS = 0.7  # a rim move may turn a face by at most about 45 degrees
+
+
+def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) -> np.ndarray:
+    """Move the open boundary of the kept mesh out to the surface's rim.
+
+    The cover's fold at a rim is smoothed inward by the optimisation, so the kept layer stops
+    short of the rim. For each boundary vertex the field is asked at ``RIM_PROBE`` voxels beyond
+    it, outward in its tangent plane: from there the closest surface point is the rim itself,
+    and the vertex moves there when that is outward and at most ``RIM_PROBE`` voxels away.
+
+    Returns new vertices (world units); faces are unchanged.
+    """
+    if len(faces) == 0 or field is None:
+        return vertices
+    topo = mesh_ops.edge_topology(faces)
+    rim_edges = topo.edges[topo.counts == 1]
+    if len(rim_edges) == 0:
+        return vertices
+    x = vertices / spacing
+    # outward: per boundary edge, in its face's plane, away from the face's third corner
+    side = np.nonzero(topo.counts[topo.face_edges] == 1)
+    f, k = side
+    a, b, c = faces[f, k], faces[f, (k + 1) % 3], faces[f, (k + 2) % 3]
+    along = x[b] - x[a]
+    inward = x[c] - x[a]
+    perp = inward - (np.einsum("ij,ij->i", inward, along)
+                     / np.maximum(np.einsum("ij,ij->i", along, along), 1e-300))[:, None] * along
+    perp /= np.maximum(np.linalg.norm(perp, axis=1), 1e-300)[:, None]
+    out_sum = np.zeros_like(x)
+    np.add.at(out_sum, a, -perp)
+    np.add.at(out_sum, b, -perp)
+    rim = np.unique(np.r_[a, b])
+    out = out_sum[rim]
+    length = np.linalg.norm(out, axis=1)
+    valid = length > 0.5  # the vertex's two rim edges agree on outward
+    out = out / np.maximum(length, 1e-12)[:, None]
+    probe = x[rim] + RIM_PROBE * out
+    dist, vec = field.closest(probe * spacing)
+    target = probe - vec / spacing
+    ahead = np.einsum("ij,ij->i", target - x[rim], out)  # only outward, no slide along the rim
+    move = valid & np.isfinite(dist) & (ahead > 0) & (ahead < RIM_PROBE)
+    shift = np.zeros_like(x)
+    shift[rim[move]] = ahead[move, None] * out[move]
+    before, _ = mesh_ops.face_normals(x, faces)
+    for _ in range(3):  # a move that turns a face over is taken back
+        after, _ = mesh_ops.face_normals(x + shift, faces)
+        turned = np.einsum("ij,ij->i", before, after) < TURN_COS
+        if not turned.any():
+            break
+        shift[faces[turned].reshape(-1)] = 0.0
+    return (x + shift) * spacing
+
+
+PINHOLE_EDGES = 8  # boundary loops this short are holes left by the choice, not rims
+
+
+def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES):
+    """Close the small holes the layer choice leaves (a face or a few, inside a sheet or notched
+    into a rim) with a fan of faces, wound like their neighbours.
+
+    Only simple loops (each vertex on one incoming and one outgoing boundary edge) of at most
+    ``max_edges`` edges are closed. Returns (faces, holes closed).
+    """
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+
+    if len(faces) == 0:
+        return faces, 0
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    topo = mesh_ops.edge_topology(faces)
+    open_side = topo.counts[topo.face_edges.reshape(-1)] == 1
+    edges = directed[open_side]
+    if len(edges) == 0:
+        return faces, 0
+    n = int(faces.max()) + 1
+    out_degree = np.bincount(edges[:, 0], minlength=n)
+    in_degree = np.bincount(edges[:, 1], minlength=n)
+    graph = sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    loop = label[edges[:, 0]]
+    size = np.bincount(loop)
+    simple = np.ones(len(size), bool)
+    bad = (out_degree[edges[:, 0]] != 1) | (in_degree[edges[:, 0]] != 1)
+    simple[loop[bad]] = False
+    small = np.nonzero(simple & (size <= max_edges) & (size >= 3))[0]
+    if len(small) == 0:
+        return faces, 0
+    following = np.full(n, -1, np.int64)
+    following[edges[:, 0]] = edges[:, 1]
+    first = {}
+    for e, l in zip(edges[:, 0], loop):
+        first.setdefault(int(l), int(e))
+    added = []
+    for l in small:
+        ring = [first[int(l)]]
+        while len(ring) <= max_edges:
+            nxt = int(following[ring[-1]])
+            if nxt == ring[0]:
+                break
+            ring.append(nxt)
+        # the loop runs along the neighbours' edges; the patch runs the other way round
+        ring = ring[::-1]
+        added += [(ring[0], ring[i], ring[i + 1]) for i in range(1, len(ring) - 1)]
+    if not added:
+        return faces, 0
+    return np.concatenate([faces, np.asarray(added, np.int64)]), int(len(small))
+
+
+FLAP_FACES = 20  # edge-connected bits this small hanging off a sheet by a vertex are fold flaps
+
+
+def drop_flaps(faces: np.ndarray, max_faces: int = FLAP_FACES):
+    """Drop the little pieces of the fold that hang off a sheet by a vertex only (bow-ties along
+    a rim). A small piece on its own (a small part of the scene) stays.
+
+    Returns (faces, pieces dropped).
+    """
+    if len(faces) == 0:
+        return faces, 0
+    pairs, _ = mesh_ops.dual_edges(faces)
+    count, label = mesh_ops.face_components(len(faces), pairs)
+    size = np.bincount(label, minlength=count)
+    small = size[label] <= max_faces
+    if not small.any():
+        return faces, 0
+    # vertices used by the larger pieces
+    big_vertex = np.zeros(int(faces.max()) + 1, bool)
+    big_vertex[faces[~small].reshape(-1)] = True
+    touching = np.zeros(count, bool)
+    touching[label[small & big_vertex[faces].any(axis=1)]] = True
+    drop = touching[label] & small
+    return faces[~drop], int(touching.sum())
