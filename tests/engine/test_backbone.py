@@ -6,11 +6,10 @@ import sys
 
 import numpy as np
 import pytest
+import torch  # a runtime requirement (requirements.txt): never skipped
 
 from engine import backbone as bb
 from engine.patches import MAX_POINTS
-
-torch = pytest.importorskip("torch")
 
 
 def random_patches(count, seed, min_points=1):

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import torch  # a runtime requirement (requirements.txt): never skipped
 from scipy.spatial import cKDTree
 
 from engine.errors import Cancelled, InputError
@@ -120,17 +121,17 @@ def test_cancel_stops_the_field():
                          predictor=nearest_through_patches)
 
 
-def test_cuda_is_refused_clearly_without_a_gpu():
-    torch = pytest.importorskip("torch")
+def test_auto_picks_cuda_only_where_there_is_one_and_cuda_is_refused_clearly_elsewhere():
+    assert resolve_device("cpu") == "cpu"
     if torch.cuda.is_available():
-        pytest.skip("this machine has a GPU")
-    assert resolve_device("auto") == "cpu"
-    with pytest.raises(InputError, match="cuda"):
-        resolve_device("cuda")
+        assert resolve_device("auto") == resolve_device("cuda") == "cuda"
+    else:
+        assert resolve_device("auto") == "cpu"
+        with pytest.raises(InputError, match="cuda"):
+            resolve_device("cuda")
 
 
 def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
-    torch = pytest.importorskip("torch")
     from engine.backbone import build_backbone_torch, load_backbone_numpy, save_backbone
     from engine.field import predict_trimmed
     from engine.patches import gather_patches

@@ -1,11 +1,10 @@
 import numpy as np
 import pytest
+import torch  # a runtime requirement (requirements.txt): never skipped
 from scipy.spatial import cKDTree
 
 from engine.selector import (DEFAULT_CONFIG, EXTRA_FEATURES, HISTOGRAM_BINS, NumpySelector,
                              build_selector_torch, macs_per_query, parent_features, predict_radii)
-
-torch = pytest.importorskip("torch")
 
 
 def _random_selector(seed=0):
