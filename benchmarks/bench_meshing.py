@@ -63,7 +63,7 @@ def main():
             iters = int(result.stats.get("iterations", settings.iterations))
             rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             status = (f"double_pairs={int(result.stats.get('double_pairs', 0))} "
-                      f"welded={int(result.stats.get('welded_vertices', 0))}")
+                      f"seams={int(result.stats.get('seam_vertices', 0))}")
             gpu_mb = torch.cuda.max_memory_allocated() / 2**20 if gpu else 0.0
             print(f"{name:7s} {res:4d} {int(result.stats['cover_faces']):9d} "
                   f"{len(result.mesh.faces):8d} {grid_s:7.1f} {t['marching_cubes']:6.2f} "

@@ -1,7 +1,7 @@
 """Entry point of the mesher: a UDF grid in, a one-layer triangle mesh out (DCUDF).
 
 Stages: marching cubes at a small iso-value r (the double cover) → covering-map optimisation
-onto the zero set → one layer chosen over the whole cover, seams welded (:mod:`.layers`) →
+onto the zero set → one layer chosen over the whole cover, rims moved out (:mod:`.layers`) →
 clean-up. See the modules of this package for each stage.
 """
 
@@ -17,7 +17,7 @@ from ..geometry import Mesh
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .cleanup import clean_mesh
 from .grid_field import UDFGrid
-from .layers import choose_layer, close_pinholes, drop_flaps, extend_rims, weld_seams
+from .layers import choose_layer, close_pinholes, drop_flaps, extend_rims, peel_lips
 from .marching import double_cover
 from .optimize import optimize_cover
 
@@ -80,7 +80,7 @@ class MeshingResult:
 
     mesh: the one-layer mesh (world units); iso: the level used (world units); timings: seconds
     per stage; messages: what a user can act on, in plain words; stats: numbers for logs (the
-    mesher's details: cover pieces, twins, trees, seams welded, pairs left double).
+    mesher's details: cover pieces, twins, trees, seam vertices, pairs left double).
     """
 
     mesh: Mesh
@@ -160,13 +160,14 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     progress(0.9, "choosing one layer")
     if settings.cut:
         keep, _, _, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
-        kept, welded = weld_seams(verts, faces[keep], h)
+        kept, lips = peel_lips(verts, faces[keep])
         kept, flaps = drop_flaps(kept)
         kept, closed = close_pinholes(kept)
-        verts = extend_rims(verts, kept, field, h)
+        verts, seams = extend_rims(verts, kept, field, h)
         stats.update({"twinned_faces": layer.twins, "layer_trees": layer.trees,
-                      "double_pairs": layer.double_pairs, "welded_vertices": welded,
-                      "flaps_dropped": flaps, "pinholes_closed": closed})
+                      "double_pairs": layer.double_pairs, "seam_vertices": len(seams),
+                      "lip_faces_dropped": lips, "flaps_dropped": flaps,
+                      "pinholes_closed": closed})
     else:
         kept = faces
     timings["layers"] = time.perf_counter() - start

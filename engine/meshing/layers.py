@@ -18,9 +18,10 @@ piece, refuses those pieces and keeps both layers; this does not.
 
 Per tree, the label whose faces had the larger area *before* the optimisation is kept: the outer
 shell of a closed surface (its cover's outer layer is the larger), either side of an open sheet.
-Where the choice switches layers the kept faces end in a *seam*: a boundary lying on other kept
-faces. Seam vertices are welded onto the nearest kept vertex that is not their own neighbour; a
-rim has nothing kept beside it and stays open.
+Where the choice switches layers the kept faces end in a *seam*: a boundary lying on the other
+kept sheet, less than a voxel from it. Seams are left as they are (welding them onto the other
+sheet turned faces over and measured as more double area than it closed). Rims, the boundaries
+beyond which the field rises, are moved out to where the field puts the surface's rim.
 
 Twins are matched geometrically (the two layers' triangulations differ): an opposite-facing face
 (normals more than about 150 degrees apart: a crease face at a junction is no twin) whose centroid lies within ``TWIN_LATERAL`` voxels of the
@@ -43,9 +44,6 @@ TWIN_LATERAL = 0.8  # voxels from the face's normal line
 COINCIDENT = 0.25  # voxels along the normal: closer pairs need no field test
 BUMP = 0.25  # a field bump of this share of the pair's distance (or 0.05 voxel) parts two sheets
 STANDOFF = 0.3  # ... and one of the pair must stand off the surface by this share of the gap
-WELD_RADIUS = 0.75  # voxels: a seam vertex joins a kept vertex this close
-WELD_RINGS = 3  # ... that is not within this many edges of it
-SHEET_COS = 0.5  # ... and whose sheet's normal is more than 60 degrees from the vertex's own
 _NEIGHBOURS = 12
 
 
@@ -55,13 +53,11 @@ class LayerReport:
 
     twins: faces with a twin; trees: independent choices (pieces of the constraint forest);
     conflicts: twin pairs that kept both faces (still double) and the area share of their faces;
-    welded: seam vertices joined to another sheet.
     """
 
     twins: int
     trees: int
     double_pairs: int
-    welded: int
 
 
 def _candidates(tree, cents, normals, query, probe, k):
@@ -248,7 +244,7 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     m = len(faces)
     if m == 0:
         empty = np.zeros(0, np.int64)
-        return np.zeros(0, bool), empty, empty, LayerReport(0, 0, 0, 0)
+        return np.zeros(0, bool), empty, empty, LayerReport(0, 0, 0)
     x = vertices / spacing
     normals, _ = mesh_ops.face_normals(x, faces)
     _, start_area = mesh_ops.face_normals(start / spacing, faces)
@@ -272,99 +268,43 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     twinned[twin_f] = twinned[twin_g] = True
     keep[_broad(~twinned, pairs, m)] = True  # the only cover of its part (a thin part's side)
     double = keep[twin_f] & keep[twin_g]
-    return keep, twin_f, twin_g, LayerReport(int(twinned.sum()), int(count), int(double.sum()), 0)
-
-
-def _rings(n: int, faces: np.ndarray, rows: np.ndarray, rings: int):
-    """For vertices ``rows``, the sparse (len(rows), n) pattern of vertices within ``rings``."""
-    from scipy import sparse
-
-    topo = mesh_ops.edge_topology(faces)
-    e = topo.edges
-    adj = sparse.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]],
-                                                   np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
-    adj = (adj + sparse.identity(n)).tocsr()
-    reach = adj[rows]
-    for _ in range(rings - 1):
-        reach = reach @ adj
-        reach.data[:] = 1.0
-    return reach.tocsr()
-
-
-def _vertex_normals(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (zero for unused vertices)."""
-    normals, areas = mesh_ops.face_normals(x, faces)
-    out = np.zeros_like(x)
-    for k in range(3):
-        np.add.at(out, faces[:, k], normals * areas[:, None])
-    norm = np.linalg.norm(out, axis=1)
-    return out / np.maximum(norm, 1e-300)[:, None]
-
-
-def weld_seams(vertices: np.ndarray, faces: np.ndarray, spacing: float):
-    """Join the seams of the kept faces: boundary vertices lying on another kept sheet.
-
-    A boundary vertex is moved onto the nearest vertex of the kept mesh within ``WELD_RADIUS``
-    voxels that is more than ``WELD_RINGS`` edges away from it along the mesh and on a sheet
-    turned more than 60 degrees from its own (so a rim, whose only close vertices are its own
-    sheet's, stays as it is). Faces that collapse are dropped,
-    duplicates kept once.
-
-    Returns (faces (m', 3) int64 into the same vertices, welded vertex count).
-    """
-    from scipy import sparse
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    if len(faces) == 0:
-        return faces, 0
-    n = len(vertices)
-    topo = mesh_ops.edge_topology(faces)
-    boundary = np.unique(topo.edges[topo.counts == 1])
-    if len(boundary) == 0:
-        return faces, 0
-    used = np.unique(faces)
-    x = vertices / spacing
-    tree = cKDTree(x[used])
-    k = min(8, len(used))
-    dist, idx = tree.query(x[boundary], k=k, distance_upper_bound=WELD_RADIUS)
-    dist, idx = dist.reshape(len(boundary), k), idx.reshape(len(boundary), k)
-    valid = idx < len(used)
-    target = np.where(valid, used[np.minimum(idx, len(used) - 1)], -1)
-    reach = _rings(n, faces, boundary, WELD_RINGS)
-    rows = np.repeat(np.arange(len(boundary)), k)
-    cols = target.reshape(-1)
-    ok = valid.reshape(-1)
-    own = np.zeros(len(cols), bool)
-    own[ok] = np.asarray(reach[rows[ok], cols[ok]]).ravel() > 0
-    ok &= ~own
-    # ... and whose sheet turns away from the vertex's own (a wall at a junction, the other layer
-    # at a flip seam); a crowded rim only meets its own, parallel sheet
-    normal = _vertex_normals(x, faces)
-    ok[ok] = np.einsum("ij,ij->i", normal[boundary[rows[ok]]], normal[cols[ok]]) < SHEET_COS
-    ok = ok.reshape(len(boundary), k)
-    has = ok.any(axis=1)
-    best = np.argmax(ok, axis=1)  # nearest first
-    src = boundary[has]
-    dst = target[np.nonzero(has)[0], best[has]]
-    if len(src) == 0:
-        return faces, 0
-    merge = sparse.coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
-    _, group = connected_components(merge, directed=False)
-    # every group moves to its lowest vertex index (deterministic)
-    rep = np.full(group.max() + 1, n, np.int64)
-    np.minimum.at(rep, group, np.arange(n))
-    new = rep[group][faces]
-    alive = (new[:, 0] != new[:, 1]) & (new[:, 1] != new[:, 2]) & (new[:, 0] != new[:, 2])
-    new = new[alive]
-    key = np.sort(new, axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
-    new = new[np.sort(first)]
-    return new, int(len(src))
+    return keep, twin_f, twin_g, LayerReport(int(twinned.sum()), int(count), int(double.sum()))
 
 
 RIM_PROBE = 2.0  # voxels beyond a rim vertex where the field is asked for the rim
-TURN_COS = 0.7  # a rim move may turn a face by at most about 45 degrees
+SEAM_PROBE = 3.5  # voxels beyond a boundary vertex where the field is asked if the surface goes on
+SEAM_DISTANCE = 0.5  # voxels: a field this low there means it does
+TURN_COS = 0.7  # a rim step may turn a face by at most about 45 degrees
+RIM_STEP = 2.0  # voxels a rim vertex moves per pass
+RIM_PASSES = 1
+
+
+def _opposite_near(x: np.ndarray, faces: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """For faces ``which``, True where an opposite-facing face's centroid is within a voxel."""
+    from scipy.spatial import cKDTree
+
+    normals, _ = mesh_ops.face_normals(x, faces)
+    cents = x[faces].mean(axis=1)
+    k = min(16, len(faces))
+    _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0)
+    idx = idx.reshape(len(which), k)
+    valid = idx < len(faces)
+    cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], normals[which])
+    return (valid & (cos < -0.5)).any(axis=1)
+
+
+def _onto_other_sheet(before: np.ndarray, after: np.ndarray, faces: np.ndarray,
+                      shift: np.ndarray) -> np.ndarray:
+    """Vertices whose rim move brought a face within a voxel of an opposite-facing face (two
+    rims of close sheets, or a rim over the layer below it): those moves are taken back."""
+    moved = np.abs(shift).sum(axis=1) > 0
+    touched = np.nonzero(moved[faces].any(axis=1))[0]
+    if len(touched) == 0:
+        return np.zeros(len(before), bool)
+    harm = _opposite_near(after, faces, touched) & ~_opposite_near(before, faces, touched)
+    out = np.zeros(len(before), bool)
+    out[faces[touched[harm]].reshape(-1)] = True
+    return out & moved
 
 
 def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) -> np.ndarray:
@@ -373,20 +313,81 @@ def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) 
     The cover's fold at a rim is smoothed inward by the optimisation, so the kept layer stops
     short of the rim. For each boundary vertex the field is asked at ``RIM_PROBE`` voxels beyond
     it, outward in its tangent plane: from there the closest surface point is the rim itself,
-    and the vertex moves there when that is outward and at most ``RIM_PROBE`` voxels away.
+    and the vertex moves there when that is outward and at most ``RIM_PROBE`` voxels away. Where
+    the field is near zero ``SEAM_PROBE`` voxels beyond, the surface goes on past the boundary:
+    the vertex is on a seam (where the layer choice switched), not a rim, and stays; so does a
+    vertex with another kept sheet just ahead (a junction). The moves
+    go in ``RIM_PASSES`` steps of at most ``RIM_STEP`` voxels.
 
-    Returns new vertices (world units); faces are unchanged.
+    Returns (new vertices (world units), seam vertex indices); faces are unchanged.
     """
+    none = np.zeros(0, np.int64)
     if len(faces) == 0 or field is None:
-        return vertices
+        return vertices, none
     topo = mesh_ops.edge_topology(faces)
     rim_edges = topo.edges[topo.counts == 1]
     if len(rim_edges) == 0:
-        return vertices
+        return vertices, none
     x = vertices / spacing
-    # outward: per boundary edge, in its face's plane, away from the face's third corner
-    side = np.nonzero(topo.counts[topo.face_edges] == 1)
-    f, k = side
+    seams = none
+    for step in range(RIM_PASSES):  # in short steps, so no face turns over on the way
+        rim, out, valid = _rim_directions(x, faces, topo)
+        probe = x[rim] + RIM_PROBE * out
+        dist, vec = field.closest(probe * spacing)
+        target = probe - vec / spacing
+        ahead = np.einsum("ij,ij->i", target - x[rim], out)  # only outward, no slide
+        if step == 0:
+            # the surface goes on well beyond (past a retracted rim too): a seam, not a rim
+            far, _ = field.closest((x[rim] + SEAM_PROBE * out) * spacing)
+            ahead_sheet = _sheet_ahead(x, faces, rim, out)
+            seams = rim[valid & ((far / spacing < SEAM_DISTANCE) | ahead_sheet)]
+        move = (valid & ~np.isin(rim, seams) & np.isfinite(dist) & (ahead > 0.05)
+                & (ahead < RIM_PROBE))
+        if not move.any():
+            break
+        shift = np.zeros_like(x)
+        shift[rim[move]] = np.minimum(ahead[move], RIM_STEP)[:, None] * out[move]
+        before, _ = mesh_ops.face_normals(x, faces)
+        for _ in range(3):  # a move that turns a face over is taken back
+            after, _ = mesh_ops.face_normals(x + shift, faces)
+            turned = np.einsum("ij,ij->i", before, after) < TURN_COS
+            if not turned.any():
+                break
+            shift[faces[turned].reshape(-1)] = 0.0
+        shift[_onto_other_sheet(x, x + shift, faces, shift)] = 0.0
+        kept_move = np.abs(shift[rim]).sum(axis=1) > 0
+        moved, direction = rim[kept_move], out[kept_move]
+        x = x + shift
+        # back onto the surface across the step (the sheet curves away from a straight step),
+        # not along it (near a rim the field's closest points lag behind the rim)
+        d, v = field.closest(x[moved] * spacing)
+        v /= spacing
+        v -= np.einsum("ij,ij->i", v, direction)[:, None] * direction
+        near = d / spacing < RIM_PROBE
+        x[moved[near]] -= v[near]
+    return x * spacing, seams
+
+
+def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndarray):
+    """True for boundary vertices with another kept sheet just ahead (a wall that a shelf's edge
+    meets): moving them out would push them through it."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(x[faces].mean(axis=1))
+    hit = np.zeros(len(rim), bool)
+    for step in (1.0, 1.5, 2.0):
+        d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6)
+        hit |= np.isfinite(d)
+    return hit
+
+
+def _rim_directions(x: np.ndarray, faces: np.ndarray, topo):
+    """Boundary vertices, their outward unit directions and whether those are well defined.
+
+    Outward: per boundary edge, in its face's plane, away from the face's third corner, summed
+    over the vertex's boundary edges.
+    """
+    f, k = np.nonzero(topo.counts[topo.face_edges] == 1)
     a, b, c = faces[f, k], faces[f, (k + 1) % 3], faces[f, (k + 2) % 3]
     along = x[b] - x[a]
     inward = x[c] - x[a]
@@ -400,22 +401,7 @@ def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) 
     out = out_sum[rim]
     length = np.linalg.norm(out, axis=1)
     valid = length > 0.5  # the vertex's two rim edges agree on outward
-    out = out / np.maximum(length, 1e-12)[:, None]
-    probe = x[rim] + RIM_PROBE * out
-    dist, vec = field.closest(probe * spacing)
-    target = probe - vec / spacing
-    ahead = np.einsum("ij,ij->i", target - x[rim], out)  # only outward, no slide along the rim
-    move = valid & np.isfinite(dist) & (ahead > 0) & (ahead < RIM_PROBE)
-    shift = np.zeros_like(x)
-    shift[rim[move]] = ahead[move, None] * out[move]
-    before, _ = mesh_ops.face_normals(x, faces)
-    for _ in range(3):  # a move that turns a face over is taken back
-        after, _ = mesh_ops.face_normals(x + shift, faces)
-        turned = np.einsum("ij,ij->i", before, after) < TURN_COS
-        if not turned.any():
-            break
-        shift[faces[turned].reshape(-1)] = 0.0
-    return (x + shift) * spacing
+    return rim, out / np.maximum(length, 1e-12)[:, None], valid
 
 
 PINHOLE_EDGES = 8  # boundary loops this short are holes left by the choice, not rims
@@ -471,6 +457,36 @@ def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES):
     if not added:
         return faces, 0
     return np.concatenate([faces, np.asarray(added, np.int64)]), int(len(small))
+
+
+LIP_COS = -0.3  # a boundary face turned this far back against its kept neighbour is a lip
+LIP_PASSES = 4
+
+
+def peel_lips(vertices: np.ndarray, faces: np.ndarray, passes: int = LIP_PASSES):
+    """Peel the lips off the rims: kept faces of the fold that turn back under the sheet.
+
+    A face on the boundary whose normal is turned back (``cos < LIP_COS``) against a kept face
+    it shares an edge with is dropped, ``passes`` times (a lip a few faces deep goes row by
+    row). Returns (faces, faces dropped).
+    """
+    dropped = 0
+    for _ in range(passes):
+        if len(faces) == 0:
+            break
+        topo = mesh_ops.edge_topology(faces)
+        on_boundary = (topo.counts[topo.face_edges] == 1).any(axis=1)
+        pairs, _ = mesh_ops.dual_edges(faces, topo)
+        normals, _ = mesh_ops.face_normals(vertices, faces)
+        back = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) < LIP_COS
+        turned = np.zeros(len(faces), bool)
+        turned[pairs[back].reshape(-1)] = True
+        lip = turned & on_boundary
+        if not lip.any():
+            break
+        dropped += int(lip.sum())
+        faces = faces[~lip]
+    return faces, dropped
 
 
 FLAP_FACES = 20  # edge-connected bits this small hanging off a sheet by a vertex are fold flaps
