@@ -112,7 +112,7 @@ def run(args) -> int:
     print(f"{len(result.mesh.vertices)} vertices, {len(result.mesh.faces)} faces; iso "
           f"{result.iso / grid.spacing:.2f} voxels; {stages} (optimised on "
           f"{result.stats.get('optimize_device', 'cpu')})", file=sys.stderr)
-    for record in getattr(result, "components", ()):  # older meshers listed their pieces
-        print(f"  piece: {record.status.value} {record.faces}/{record.cover_faces} faces "
-              f"{record.detail}", file=sys.stderr)
+    layers = ("twinned_faces", "layer_trees", "double_pairs", "seam_vertices")
+    print("  layers: " + ", ".join(f"{k} {int(result.stats[k])}" for k in layers
+                                   if k in result.stats), file=sys.stderr)
     return 0
