@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from engine.__main__ import main
+from engine.bench.dataset import shared_dir
 from engine.errors import InputError
 from engine.geometry import Mesh
 from engine.metrics import chamfer_f_nc, evaluate
 
 KEYS = ("cd_l1_x100", "cd_l2", "f1_0.005", "f1_0.01", "nc")
-BUNNY = Path("/work/shared/data/real/cgal/bunny00.off")
+BUNNY = Path(shared_dir()) / "data" / "real" / "cgal" / "bunny00.off"
 
 
 def grid_square(cells: int, side: float = 1.0, origin=(0.0, 0.0, 0.0)) -> Mesh:
