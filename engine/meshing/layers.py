@@ -63,7 +63,8 @@ class LayerReport:
 def _candidates(tree, cents, normals, query, probe, k):
     """Opposite-facing faces near ``probe`` points: (face, candidate, depth, lateral) arrays."""
     k = min(k, len(cents))
-    dist, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT)
+    dist, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT,
+                           workers=-1)
     idx = idx.reshape(len(query), k)
     valid = idx < len(cents)
     rows, cols = np.nonzero(valid)
@@ -286,7 +287,7 @@ def _opposite_near(x: np.ndarray, faces: np.ndarray, which: np.ndarray) -> np.nd
     normals, _ = mesh_ops.face_normals(x, faces)
     cents = x[faces].mean(axis=1)
     k = min(16, len(faces))
-    _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0)
+    _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0, workers=-1)
     idx = idx.reshape(len(which), k)
     valid = idx < len(faces)
     cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], normals[which])
@@ -376,7 +377,7 @@ def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndar
     tree = cKDTree(x[faces].mean(axis=1))
     hit = np.zeros(len(rim), bool)
     for step in (1.0, 1.5, 2.0):
-        d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6)
+        d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6, workers=-1)
         hit |= np.isfinite(d)
     return hit
 
