@@ -4,7 +4,8 @@ The CLI, the Blender operator, the batch script and the benchmark all call :func
 none of them re-implements a stage. The stages (DESIGN.md, "Data flow"):
 
 1. validate the settings; refuse clouds no surface can be built from; drop isolated points
-   when there are many (:mod:`.outliers`); put the points in the unit frame;
+   when there are many or they stretch the bounding box (:mod:`.outliers`); put the points in
+   the unit frame;
 2. evaluate the UDF on the grid band near the points (:mod:`.field`);
 3. extract a single-layer mesh with DCUDF (:mod:`.meshing`);
 4. map the mesh back to the input's coordinates (the same similarity transform, inverted) and
@@ -21,7 +22,7 @@ from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
 from .frame import UnitFrame, validate_points
 from .geometry import Mesh, PointCloud
-from .outliers import AUTO_SHARE, find_outliers
+from .outliers import AUTO_SHARE, AUTO_SHRINK, box_shrink, find_outliers
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .settings import ReconstructSettings
 
@@ -45,7 +46,8 @@ class ReconstructResult:
         ``total``, and the mesher's own stages as ``meshing_<stage>``.
     stats : dict
         ``points`` (used), ``outliers`` (dropped), ``outliers_found`` (flagged: ``auto`` keeps
-        them when they are few), ``grid_shape``, ``spacing``, ``band_radius``, ``band_nodes``,
+        them when they are few and do not stretch the bounding box), ``grid_shape``,
+        ``spacing``, ``band_radius``, ``band_nodes``,
         ``queries`` (backbone evaluations), ``sparse_balls``, ``mean_patch_points``,
         ``udf_source``, ``device``, ``iso`` (unit frame), ``components`` (pieces of the output),
         ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
@@ -113,7 +115,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     progress(0.0, "finding outliers")
     mark = time.perf_counter()
     given = len(points)
-    points, colors, outliers_found, outliers = _drop_outliers(points, colors, settings)
+    points, colors, outliers_found, outliers, shrink = _drop_outliers(points, colors, settings)
     timings["outliers"] = time.perf_counter() - mark
     check_cancel(cancel)
     frame = UnitFrame.from_points(points)
@@ -161,8 +163,10 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     messages = list(meshed.messages)
     if outliers:
         share = 100.0 * outliers / given
-        messages.insert(0, f"dropped {outliers:,} isolated points ({share:.1f} %) as outliers; "
-                           f"set outliers to 'keep' to use every point")
+        why = (f": they stretched the bounding box {shrink:,.0f} times"
+               if settings.outliers == "auto" and outliers < AUTO_SHARE * given else "")
+        messages.insert(0, f"dropped {outliers:,} isolated points ({share:.1f} %) as outliers"
+                           f"{why}; set outliers to 'keep' to use every point")
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
@@ -175,22 +179,27 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings):
     """The points (and colours) without the outliers, as ``settings.outliers`` says.
 
-    Returns ``(points, colors, found, dropped)``: how many points the test flagged, and how many
-    of them were dropped (all or none). Refuses, saying why, when too few points would be left.
+    Returns ``(points, colors, found, dropped, shrink)``: how many points the test flagged, how
+    many of them were dropped (all or none), and how many times dropping them shrinks the
+    bounding box's longest side. ``auto`` drops them when they are at least :data:`AUTO_SHARE`
+    of the cloud or shrink the box more than :data:`AUTO_SHRINK` times. Refuses, saying why,
+    when too few points would be left.
     """
     if settings.outliers == "keep":
-        return points, colors, 0, 0
+        return points, colors, 0, 0, 1.0
     outlier = find_outliers(points, settings.outlier_ratio)
     found = int(outlier.sum())
-    if not found or (settings.outliers == "auto" and found < AUTO_SHARE * len(points)):
-        return points, colors, found, 0
+    shrink = box_shrink(points, outlier)
+    if not found or (settings.outliers == "auto" and found < AUTO_SHARE * len(points)
+                     and not shrink > AUTO_SHRINK):
+        return points, colors, found, 0, shrink
     kept = points[~outlier]
     try:
         validate_points(kept)
     except InputError as error:
         raise InputError(f"{error} (after dropping {found:,} of {len(points):,} points as "
                          f"outliers; set outliers to 'keep' to use every point)") from None
-    return kept, None if colors is None else np.asarray(colors)[~outlier], found, found
+    return kept, None if colors is None else np.asarray(colors)[~outlier], found, found, shrink
 
 
 def meshing_settings(settings: ReconstructSettings):

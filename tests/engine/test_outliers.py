@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.outliers import find_outliers
+from engine.outliers import AUTO_SHARE, box_shrink, find_outliers
 from engine.reconstruct import reconstruct
 from engine.settings import ReconstructSettings
 
@@ -111,3 +111,39 @@ def test_the_sparse_fringe_of_a_scan_is_kept():
     fringe = np.column_stack([0.9 + 0.1 * rng.random(220), rng.random(220), np.zeros(220)])
     found = find_outliers(np.vstack([dense, fringe]))
     assert found.sum() <= 5, found.sum()
+
+
+def sphere_with_far_strays(surface=9950, strays=50, seed=7):
+    """Points on a sphere 1 cm across (metres), plus strays spread over a 100 m cube round it.
+
+    Returns (points, is_stray).
+    """
+    rng = np.random.default_rng(seed)
+    directions = rng.normal(size=(surface, 3))
+    sphere = 0.005 * directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    far = rng.uniform(-50.0, 50.0, (strays, 3))
+    return np.vstack([sphere, far]), np.r_[np.zeros(surface, bool), np.ones(strays, bool)]
+
+
+def test_box_shrink_is_how_much_the_outliers_stretch_the_box():
+    points, stray = sphere_with_far_strays()
+    assert box_shrink(points, stray) > 1000
+    assert box_shrink(points, np.zeros(len(points), bool)) == 1.0
+    points, stray = plane_with_strays(surface=8000, strays=20, seed=4)
+    assert box_shrink(points, stray) == pytest.approx(1.0, abs=0.01)
+
+
+def test_auto_drops_a_few_far_strays_that_stretch_the_box_and_says_so():
+    # 0.5 % strays, under AUTO_SHARE, but they set the frame: kept, the sphere would be lost
+    points, stray = sphere_with_far_strays()
+    assert stray.mean() < AUTO_SHARE
+    result = reconstruct(points, ReconstructSettings(resolution=32, device="cpu"),
+                         udf_source="nearest")
+    assert result.stats["outliers"] == 50 and result.stats["outliers_found"] == 50
+    assert result.stats["points"] == len(points) - 50
+    assert result.messages[0].startswith("dropped 50 isolated points (0.5 %) as outliers: "
+                                         "they stretched the bounding box"), result.messages
+    # the mesh is the sphere: every vertex within two voxels of its surface
+    radius = np.linalg.norm(result.mesh.vertices, axis=1)
+    assert len(result.mesh.faces) > 500
+    assert np.abs(radius - 0.005).max() < 2 * 0.01 / 32
