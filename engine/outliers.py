@@ -26,7 +26,11 @@ not spare. Hence the ``auto`` policy (:data:`AUTO_SHARE`). docs/benchmarks.md ha
 the meshes.
 """
 
+from typing import Optional
+
 import numpy as np
+
+from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 
 NEIGHBOURS = 8
 """Nearest distinct points whose mean distance is a point's spacing."""
@@ -72,10 +76,19 @@ sized to them and the object lost. Surface mistaken for outliers lies on the sur
 the box of the rest, and shrinks it hardly at all (1.0 on the benchmark's clean scans)."""
 
 _CHUNK = 20_000
-"""Points per neighbour query, so memory stays bounded for clouds of millions of points."""
+"""Points per neighbour query, so memory stays bounded for clouds of millions of points; also
+how often progress is reported and a cancel checked (about half a second a chunk on two cores)."""
+
+_SORT_SHARE = 0.05
+"""Share of the stage's progress for sorting the points (finding copies)."""
+
+_SURFACE_SHARE = 0.1
+"""Share of the stage's progress for sparing the flagged points that are surface."""
 
 
-def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO) -> np.ndarray:
+def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO,
+                  progress: Optional[ProgressFn] = None,
+                  cancel: Optional[CancelFn] = None) -> np.ndarray:
     """Which points are isolated from the surface the others describe.
 
     Parameters
@@ -84,58 +97,116 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO) -> np.ndarra
     ratio : a point is flagged when its spacing exceeds ``ratio`` times the median spacing
         of its :data:`CONTEXT` nearest points (and is an outlier when its neighbourhood is not
         flat); 0 finds none.
+    progress : ``progress(fraction, message)``, told the fraction of this stage done, once per
+        :data:`_CHUNK` points of each neighbour query
+    cancel : ``cancel() -> bool``, asked as often; :class:`~.errors.Cancelled` is raised when
+        it says stop
 
     Returns
     -------
     (N,) bool
         True for outliers. Copies of one position share one answer.
     """
+    progress = progress or no_progress
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if ratio <= 0 or len(points) == 0:
         return np.zeros(len(points), dtype=bool)
-    distinct, copy_of = np.unique(points, axis=0, return_inverse=True)
+    check_cancel(cancel)
+    progress(0.0, "finding outliers: sorting the points")
+    distinct, copy_of = _distinct_rows(points)
+    check_cancel(cancel)
     flagged = np.zeros(len(distinct), dtype=bool)
-    for _ in range(ROUNDS):
+    for round_ in range(ROUNDS):
         kept = np.flatnonzero(~flagged)
         if len(kept) <= NEIGHBOURS + 1:
             break
-        isolated = _isolated(distinct[kept], ratio)
+        span = (1.0 - _SORT_SHARE - _SURFACE_SHARE) / ROUNDS
+        isolated = _isolated(distinct[kept], ratio,
+                             sub_progress(progress, _SORT_SHARE + round_ * span,
+                                          _SORT_SHARE + (round_ + 1) * span), cancel,
+                             f"pass {round_ + 1} of at most {ROUNDS}")
         if not isolated.any():
             break
         flagged[kept[isolated]] = True
     if flagged.any() and np.count_nonzero(~flagged) >= FLAT_NEIGHBOURS:
-        flagged[_on_the_surface(distinct, flagged)] = False
+        on_surface = _on_the_surface(distinct, flagged,
+                                     sub_progress(progress, 1.0 - _SURFACE_SHARE, 1.0), cancel)
+        flagged[on_surface] = False
+    progress(1.0, f"finding outliers: {int(np.count_nonzero(flagged)):,} isolated positions")
     return flagged[copy_of.reshape(-1)]
 
 
-def _isolated(points: np.ndarray, ratio: float) -> np.ndarray:
+def _distinct_rows(points: np.ndarray):
+    """``np.unique(points, axis=0, return_inverse=True)``, the same rows in the same order.
+
+    Sorted on x alone first (a fraction of the time of sorting whole rows, which would hold up
+    a cancel for seconds on millions of points); only runs of equal x are sorted on y and z.
+    """
+    order = np.argsort(points[:, 0], kind="stable")
+    ordered = points[order]
+    tie = ordered[1:, 0] == ordered[:-1, 0]
+    if tie.any():
+        in_run = np.zeros(len(points), dtype=bool)
+        in_run[1:] |= tie
+        in_run[:-1] |= tie
+        runs = np.flatnonzero(in_run)  # runs of distinct x, each contiguous, x ascending
+        members = order[runs]
+        order[runs] = members[np.lexsort((points[members, 2], points[members, 1],
+                                          points[members, 0]))]
+        ordered = points[order]
+    new = np.ones(len(points), dtype=bool)
+    np.any(ordered[1:] != ordered[:-1], axis=1, out=new[1:])
+    copy_of = np.empty(len(points), dtype=np.int64)
+    copy_of[order] = np.cumsum(new) - 1
+    return ordered[new], copy_of
+
+
+def _isolated(points: np.ndarray, ratio: float, progress: ProgressFn = no_progress,
+              cancel: Optional[CancelFn] = None, label: str = "") -> np.ndarray:
     """One pass of the spacing test on distinct points: (M, 3) -> (M,) bool."""
     from scipy.spatial import cKDTree
 
     tree = cKDTree(points)
+    check_cancel(cancel)
     neighbours = min(NEIGHBOURS, len(points) - 1)
     context = min(CONTEXT, len(points) - 1)
+    # the context query (CONTEXT neighbours) costs about nine times the spacing query
+    chunks = -(-len(points) // _CHUNK)
+    steps, done = 10 * chunks, 0
+
+    def step(weight):
+        nonlocal done
+        done += weight
+        check_cancel(cancel)
+        progress(done / steps, f"finding outliers ({label}): {100.0 * done / steps:.0f} %")
+
     spacing = np.empty(len(points))
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
         distances, _ = tree.query(block, k=neighbours + 1, workers=-1)
         spacing[start:start + len(block)] = distances[:, 1:].mean(axis=1)
+        step(1)
     isolated = np.empty(len(points), dtype=bool)
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
         _, nearest = tree.query(block, k=context + 1, workers=-1)
         typical = np.median(spacing[nearest[:, 1:]], axis=1)
         isolated[start:start + len(block)] = spacing[start:start + len(block)] > ratio * typical
+        step(9)
     return isolated
 
 
-def _on_the_surface(points: np.ndarray, flagged: np.ndarray) -> np.ndarray:
+def _on_the_surface(points: np.ndarray, flagged: np.ndarray, progress: ProgressFn = no_progress,
+                    cancel: Optional[CancelFn] = None) -> np.ndarray:
     """Indices of the flagged points that are surface after all (see the module's text)."""
     from scipy.spatial import cKDTree
 
     suspects = np.flatnonzero(flagged)
     unflagged = points[~flagged]
-    everything, surface = cKDTree(points), cKDTree(unflagged)
+    everything = cKDTree(points)
+    check_cancel(cancel)
+    surface = cKDTree(unflagged)
+    check_cancel(cancel)
     on_surface = np.empty(len(suspects), dtype=bool)
     for start in range(0, len(suspects), _CHUNK):
         block = points[suspects[start:start + _CHUNK]]
@@ -147,6 +218,9 @@ def _on_the_surface(points: np.ndarray, flagged: np.ndarray) -> np.ndarray:
         off = np.abs(np.einsum("ni,ni->n", block - centre, eigenvectors[:, :, 0]))
         spread = np.sqrt(eigenvalues[:, 1] + eigenvalues[:, 2])
         on_surface[start:start + len(block)] = flat & (off < OFF_PLANE * spread)
+        check_cancel(cancel)
+        done = min(start + _CHUNK, len(suspects)) / len(suspects)
+        progress(done, f"finding outliers (sparing surface points): {100.0 * done:.0f} %")
     return suspects[on_surface]
 
 

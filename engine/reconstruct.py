@@ -27,6 +27,7 @@ from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progr
 from .settings import ReconstructSettings
 
 # Share of the progress bar per stage (the field and the mesher take most of the time).
+_OUTLIERS_END = 0.01
 _FIELD_END = 0.6
 _MESH_END = 0.97
 # Below this mean number of points per ball the backbone sees too little of the surface.
@@ -115,7 +116,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     progress(0.0, "finding outliers")
     mark = time.perf_counter()
     given = len(points)
-    points, colors, outliers_found, outliers, shrink = _drop_outliers(points, colors, settings)
+    points, colors, outliers_found, outliers, shrink = _drop_outliers(
+        points, colors, settings, sub_progress(progress, 0.0, _OUTLIERS_END), cancel)
     timings["outliers"] = time.perf_counter() - mark
     check_cancel(cancel)
     frame = UnitFrame.from_points(points)
@@ -176,18 +178,19 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     return ReconstructResult(result_mesh, messages, timings, stats)
 
 
-def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings):
+def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings,
+                   progress: Optional[ProgressFn] = None, cancel: Optional[CancelFn] = None):
     """The points (and colours) without the outliers, as ``settings.outliers`` says.
 
     Returns ``(points, colors, found, dropped, shrink)``: how many points the test flagged, how
     many of them were dropped (all or none), and how many times dropping them shrinks the
     bounding box's longest side. ``auto`` drops them when they are at least :data:`AUTO_SHARE`
     of the cloud or shrink the box more than :data:`AUTO_SHRINK` times. Refuses, saying why,
-    when too few points would be left.
+    when too few points would be left. ``progress`` and ``cancel`` go to :func:`find_outliers`.
     """
     if settings.outliers == "keep":
         return points, colors, 0, 0, 1.0
-    outlier = find_outliers(points, settings.outlier_ratio)
+    outlier = find_outliers(points, settings.outlier_ratio, progress, cancel)
     found = int(outlier.sum())
     shrink = box_shrink(points, outlier)
     if not found or (settings.outliers == "auto" and found < AUTO_SHARE * len(points)

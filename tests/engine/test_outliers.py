@@ -147,3 +147,48 @@ def test_auto_drops_a_few_far_strays_that_stretch_the_box_and_says_so():
     radius = np.linalg.norm(result.mesh.vertices, axis=1)
     assert len(result.mesh.faces) > 500
     assert np.abs(radius - 0.005).max() < 2 * 0.01 / 32
+
+
+def test_the_outlier_stage_reports_progress(monkeypatch):
+    import engine.outliers
+
+    monkeypatch.setattr(engine.outliers, "_CHUNK", 500)  # many chunks from a small cloud
+    points, stray = plane_with_strays(surface=6000, strays=300, seed=8)
+    reports = []
+    found = find_outliers(points, progress=lambda fraction, message: reports.append(
+        (fraction, message)))
+    assert np.array_equal(found, find_outliers(points))  # the same answer with or without
+    fractions = [fraction for fraction, _ in reports]
+    assert len(reports) >= 10  # several per pass, one per chunk of points
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] == 1.0
+    assert all(message.startswith("finding outliers") for _, message in reports)
+    assert len([f for f in fractions if 0.05 < f < 0.35]) >= 10  # the first pass, chunk by chunk
+
+
+def test_the_outlier_stage_honours_cancel_on_two_million_points():
+    import time
+
+    from engine.errors import Cancelled
+
+    rng = np.random.default_rng(9)
+    directions = rng.normal(size=(2_000_000, 3))
+    points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    flip = time.perf_counter() + 0.5
+    with pytest.raises(Cancelled):
+        find_outliers(points, cancel=lambda: time.perf_counter() > flip)
+    assert time.perf_counter() - flip < 2.0, time.perf_counter() - flip
+
+
+def test_reconstruct_follows_and_cancels_the_outlier_stage():
+    from engine.errors import Cancelled
+
+    points, _ = plane_with_strays(seed=10)
+    messages = []
+    with pytest.raises(Cancelled):
+        reconstruct(points, ReconstructSettings(resolution=32, device="cpu"),
+                    progress=lambda fraction, message: messages.append(message),
+                    cancel=lambda: any("pass 1" in message for message in messages),
+                    udf_source="nearest")
+    assert any(message.startswith("finding outliers (pass 1") for message in messages)
+    assert not any("outliers" not in message and "preparing" not in message
+                   for message in messages)  # stopped inside the outlier stage
