@@ -15,7 +15,20 @@ MIN_POINTS = 10
 """Fewest distinct points accepted; fewer cannot describe a surface."""
 
 _LINE_TOLERANCE = 1e-9
-"""A cloud is a line when every point lies within this fraction of its extent from one line."""
+"""A cloud is a line when every point lies within this fraction of its extent from one line
+(or within :data:`_ROUNDING_ULPS` roundings of its coordinates, when that is more)."""
+
+_ROUNDING_ULPS = 8.0
+"""Float64 roundings (``eps * largest |coordinate|``) within which a point is on the line: far
+from the origin (offset 1e8, extent 16) the coordinates' own rounding moves collinear points
+off their line by more than :data:`_LINE_TOLERANCE` of the extent (1.7e-9 measured)."""
+
+SMALLEST_EXTENT = 1e-100
+"""Smallest extent (bounding box's longest side, input units) accepted: squared distances
+between neighbours of a smaller cloud underflow."""
+
+LARGEST_COORDINATE = 1e100
+"""Largest absolute coordinate (input units) accepted: squared distances overflow beyond."""
 
 _UNIQUE_SAMPLE = 4096
 """Distinct points are first counted in this many leading points; usually that settles it."""
@@ -78,7 +91,10 @@ def validate_points(points, min_points: int = MIN_POINTS) -> np.ndarray:
 
     Refused: anything that is not an (N, 3) array of numbers; NaN or infinite coordinates;
     fewer than ``min_points`` points, or fewer than ``min_points`` distinct ones (duplicates
-    are allowed otherwise); all points at one position; all points on one line.
+    are allowed otherwise); all points at one position; absurd scales (an extent under
+    :data:`SMALLEST_EXTENT` or a coordinate over :data:`LARGEST_COORDINATE`); all points on
+    one line (tested in the centred frame scaled to extent 1, so the same line is refused
+    wherever it lies).
 
     Parameters
     ----------
@@ -119,15 +135,24 @@ def validate_points(points, min_points: int = MIN_POINTS) -> np.ndarray:
         raise InputError(f"{bad} of {count} points have NaN or infinite coordinates; remove "
                          f"them (or fix the export that wrote them) and try again")
     low, high = array.min(axis=0), array.max(axis=0)
+    largest = float(max(np.max(np.abs(low)), np.max(np.abs(high))))
+    if largest > LARGEST_COORDINATE:
+        raise InputError(f"the coordinates reach {largest:.3g}; coordinates up to "
+                         f"{LARGEST_COORDINATE:.0e} are accepted: rescale the cloud (or fix "
+                         f"the export's units) and try again")
     extent = float(np.max(high - low))
     if extent == 0.0:
         raise InputError(f"all {count} points are at the same position {low.tolist()}; "
                          f"a surface needs points spread over an area")
+    if extent < SMALLEST_EXTENT:
+        raise InputError(f"the points span only {extent:.3g} units; an extent of at least "
+                         f"{SMALLEST_EXTENT:.0e} is accepted: rescale the cloud (or fix the "
+                         f"export's units) and try again")
     distinct = _count_distinct(array, min_points)
     if distinct < min_points:
         raise InputError(f"only {distinct} distinct points ({count} with duplicates); a "
                          f"surface needs at least {min_points}: add more points")
-    if _on_a_line(array, extent):
+    if _on_a_line(array, (low + high) / 2.0, extent, largest):
         raise InputError("all points lie on a line; a surface needs a 2-D spread: check "
                          "that the right object or file was chosen")
     return array
@@ -146,15 +171,20 @@ def _count_distinct(points: np.ndarray, enough: int) -> int:
     return len(np.unique(points, axis=0))
 
 
-def _on_a_line(points: np.ndarray, extent: float) -> bool:
-    """True when every point lies within ``_LINE_TOLERANCE * extent`` of one line.
+def _on_a_line(points: np.ndarray, center: np.ndarray, extent: float, largest: float) -> bool:
+    """True when every point lies within ``_LINE_TOLERANCE`` of one line, in the unit frame.
 
-    The line tested is the least-squares one: through the centroid along the principal axis
-    (the largest eigenvector of the 3 x 3 scatter matrix).
+    The shape is tested on the points centred on their bounding box's ``center`` and scaled by
+    its ``extent`` (the unit frame), so the test is the same at any offset and scale: no
+    scatter matrix over- or underflows. The line tested is the least-squares one: through the
+    centroid along the principal axis (the largest eigenvector of the 3 x 3 scatter matrix).
+    Far from the origin the coordinates' rounding (``largest`` absolute coordinate) widens the
+    tolerance (:data:`_ROUNDING_ULPS`).
     """
-    centred = points - points.mean(axis=0)
+    centred = (points - center) / extent
+    centred -= centred.mean(axis=0)
     _, vectors = np.linalg.eigh(centred.T @ centred)
     axis = vectors[:, -1]
     off_line = centred - np.outer(centred @ axis, axis)
-    return float(np.sqrt(np.max(np.einsum("ij,ij->i", off_line, off_line)))) <= (
-        _LINE_TOLERANCE * extent)
+    tolerance = max(_LINE_TOLERANCE, _ROUNDING_ULPS * np.finfo(np.float64).eps * largest / extent)
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", off_line, off_line)))) <= tolerance

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.frame import MIN_POINTS, UnitFrame, validate_points
+from engine.frame import (LARGEST_COORDINATE, MIN_POINTS, SMALLEST_EXTENT, UnitFrame,
+                          validate_points)
 
 
 def _cloud(n=2000, seed=0, offset=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)):
@@ -102,7 +103,8 @@ def test_distinct_points_beyond_the_leading_sample_are_counted():
         validate_points(points[:-2])
 
 
-@pytest.mark.parametrize("offset", [(0.0, 0.0, 0.0), (4.0e5, 3.0e6, 250.0)])
+@pytest.mark.parametrize("offset", [(0.0, 0.0, 0.0), (4.0e5, 3.0e6, 250.0), (1e8, 1e8, 1e8),
+                                    (1e10, -3e9, 5e9)])
 def test_points_on_a_line_are_refused(offset):
     t = np.random.default_rng(4).uniform(-10, 10, 500)
     points = np.outer(t, [0.3, -0.5, 0.8]) + np.asarray(offset)
@@ -121,3 +123,25 @@ def test_a_million_points_validate_quickly():
     start = time.perf_counter()
     UnitFrame.from_points(points)
     assert time.perf_counter() - start < 1.0
+
+
+@pytest.mark.parametrize("scale, fragment", [(1e-300, "the points span only"),
+                                             (1e-160, "the points span only"),
+                                             (1e160, "coordinates reach"),
+                                             (1e300, "coordinates reach")])
+def test_absurd_scales_are_refused_with_what_to_do(scale, fragment):
+    points = _cloud(seed=6) * scale  # a cube: only its scale is wrong
+    with pytest.raises(InputError, match=fragment) as caught:
+        UnitFrame.from_points(points)
+    assert "rescale the cloud" in str(caught.value)
+
+
+def test_scales_inside_the_limits_keep_their_shape():
+    points = _cloud(seed=7)
+    for scale in (SMALLEST_EXTENT * 10, 1e-20, 1e20, LARGEST_COORDINATE / 10):
+        assert UnitFrame.from_points(points * scale).scale == pytest.approx(
+            UnitFrame.from_points(points).scale * scale, rel=1e-12)
+    line = np.outer(np.linspace(-1, 1, 100), [0.6, 0.8, 0.0])
+    for scale in (SMALLEST_EXTENT * 10, LARGEST_COORDINATE / 10):
+        with pytest.raises(InputError, match="lie on a line"):
+            validate_points(line * scale)
