@@ -43,7 +43,7 @@ OPPOSITE_COS = -0.85  # twins' normals are more than about 150 degrees apart
 TWIN_LATERAL = 0.8  # voxels from the face's normal line
 COINCIDENT = 0.25  # voxels along the normal: closer pairs need no field test
 BUMP = 0.25  # a field bump of this share of the pair's distance (or 0.05 voxel) parts two sheets
-STANDOFF = 0.3  # ... and one of the pair must stand off the surface by this share of the gap
+STANDOFF = 0.3  # ... and, past a voxel apart, one must stand off the surface by this share of it
 _NEIGHBOURS = 12
 
 
@@ -80,9 +80,10 @@ def _candidates(tree, cents, normals, query, probe, k):
 def _one_sheet_between(field, spacing, x_f, x_g):
     """True where two faces apart (voxel coordinates) are the two layers of one sheet.
 
-    Layers that did not meet stand off the surface (at least one has a distance of a good part
-    of the gap) with the surface between them (no bump of the field midway); two converged
-    faces apart are two sheets.
+    The surface lies between the two layers of one sheet: the field has no bump midway (two
+    sheets a little apart have ``d > 0`` there). Pairs more than a voxel apart must also stand
+    off the surface (at least one at a good part of the gap: layers that did not meet); two
+    converged faces that far apart are two sheets.
     """
     u_f, _ = field.closest(x_f * spacing)
     u_g, _ = field.closest(x_g * spacing)
@@ -90,7 +91,7 @@ def _one_sheet_between(field, spacing, x_f, x_g):
     gap = np.linalg.norm(x_g - x_f, axis=1)
     high = np.maximum(u_f, u_g) / spacing
     bump = u_m / spacing - high
-    return (bump <= np.maximum(BUMP * gap, 0.05)) & (high >= STANDOFF * gap)
+    return (bump <= np.maximum(BUMP * gap, 0.05)) & ((gap <= 1.0) | (high >= STANDOFF * gap))
 
 
 def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
