@@ -160,7 +160,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
                          if udf_source == "network" else 0),
              "iso": float(meshed.iso), "components": _piece_count(result_mesh),
              "vertices": int(len(result_mesh.vertices)), "faces": int(len(result_mesh.faces)),
-             "meshing": dict(meshed.stats)}
+             "meshing": dict(meshed.stats), "meshing_notes": list(meshed.details)}
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
     if outliers:

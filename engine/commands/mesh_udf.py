@@ -106,6 +106,8 @@ def run(args) -> int:
     print(file=sys.stderr)
     for message in result.messages:
         print(f"warning: {message}", file=sys.stderr)
+    for detail in result.details:
+        print(f"  mesher: {detail}", file=sys.stderr)
     check_result(result.mesh, "meshing the grid")
     write_mesh(args.output, result.mesh)
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items())

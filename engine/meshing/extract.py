@@ -79,8 +79,9 @@ class MeshingResult:
     """The mesh and what happened on the way.
 
     mesh: the one-layer mesh (world units); iso: the level used (world units); timings: seconds
-    per stage; messages: what a user can act on, in plain words; stats: numbers for logs (the
-    mesher's details: cover pieces, twins, trees, seam vertices, pairs left double).
+    per stage; messages: what a user can act on, in plain words; details: the mesher's own notes
+    for logs (iso-value raised, a fragmented cover); stats: numbers for logs (cover pieces,
+    twins, trees, seam vertices, pairs left double).
     """
 
     mesh: Mesh
@@ -88,6 +89,7 @@ class MeshingResult:
     timings: Dict[str, float] = field(default_factory=dict)
     messages: List[str] = field(default_factory=list)
     stats: Dict[str, float] = field(default_factory=dict)
+    details: List[str] = field(default_factory=list)
 
 
 def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
@@ -122,13 +124,12 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     start = time.perf_counter()
     verts, faces, iso, report, notes = double_cover(
         field, settings.iso, sub_progress(progress, 0.0, 0.05), cancel)
-    messages += notes
     timings["marching_cubes"] = time.perf_counter() - start
     stats = {"iso_voxels": iso / h, "cover_vertices": len(verts), "cover_faces": len(faces),
              "cover_pieces": report.components}
     if len(faces) == 0:
         return MeshingResult(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64)), iso,
-                             timings, messages + ["no surface found"], stats)
+                             timings, messages + ["no surface found"], stats, notes)
 
     start = time.perf_counter()
     check_cancel(cancel)
@@ -181,5 +182,6 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
         messages.append(f"{counts['small_pieces']} pieces with fewer than "
                         f"{settings.min_component_faces} faces were removed")
     progress(1.0, "meshing done")
-    return MeshingResult(Mesh(out_v, out_f.astype(np.int64)), iso, timings, messages, stats)
+    return MeshingResult(Mesh(out_v, out_f.astype(np.int64)), iso, timings, messages, stats,
+                         notes)
 
