@@ -160,7 +160,7 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     start = time.perf_counter()
     progress(0.9, "choosing one layer")
     if settings.cut:
-        keep, _, _, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
+        keep, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
         kept, lips = peel_lips(verts, faces[keep])
         kept, flaps = drop_flaps(kept)
         kept, closed = close_pinholes(kept)

@@ -52,7 +52,7 @@ class LayerReport:
     """What the layer choice did.
 
     twins: faces with a twin; trees: independent choices (pieces of the constraint forest);
-    conflicts: twin pairs that kept both faces (still double) and the area share of their faces;
+    double_pairs: twin pairs that still keep both faces.
     """
 
     twins: int
@@ -63,8 +63,8 @@ class LayerReport:
 def _candidates(tree, cents, normals, query, probe, k):
     """Opposite-facing faces near ``probe`` points: (face, candidate, depth, lateral) arrays."""
     k = min(k, len(cents))
-    dist, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT,
-                           workers=-1)
+    _, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT,
+                        workers=-1)
     idx = idx.reshape(len(query), k)
     valid = idx < len(cents)
     rows, cols = np.nonzero(valid)
@@ -241,12 +241,11 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
 
     Returns
     -------
-    keep : (m,) bool; twin_f, twin_g : (P,) int64 twin pairs; report : LayerReport.
+    keep : (m,) bool; report : LayerReport.
     """
     m = len(faces)
     if m == 0:
-        empty = np.zeros(0, np.int64)
-        return np.zeros(0, bool), empty, empty, LayerReport(0, 0, 0)
+        return np.zeros(0, bool), LayerReport(0, 0, 0)
     x = vertices / spacing
     normals, _ = mesh_ops.face_normals(x, faces)
     _, start_area = mesh_ops.face_normals(start / spacing, faces)
@@ -270,7 +269,7 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     twinned[twin_f] = twinned[twin_g] = True
     keep[_broad(~twinned, pairs, m)] = True  # the only cover of its part (a thin part's side)
     double = keep[twin_f] & keep[twin_g]
-    return keep, twin_f, twin_g, LayerReport(int(twinned.sum()), int(count), int(double.sum()))
+    return keep, LayerReport(int(twinned.sum()), int(count), int(double.sum()))
 
 
 RIM_PROBE = 2.0  # voxels beyond a rim vertex where the field is asked for the rim
