@@ -41,9 +41,8 @@ from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress
 from .radius import (max_radius, parent_ball, radii_for_queries, reads_parent_ball,
                      require_policy)
-from .settings import ReconstructSettings
+from .settings import UDF_SOURCES, ReconstructSettings
 
-UDF_SOURCES = ("network", "nearest")
 # Balls with fewer points use the nearest-point distance (see the module docstring).
 MIN_PATCH_POINTS = 3
 # Balls with fewer points are widened by these factors in turn until one holds enough

@@ -31,6 +31,7 @@ from typing import Optional
 import numpy as np
 
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+from .settings import DEFAULT_OUTLIER_RATIO
 
 NEIGHBOURS = 8
 """Nearest distinct points whose mean distance is a point's spacing."""
@@ -41,9 +42,6 @@ a room full of strays the surface's points, not the strays, set the median."""
 
 ROUNDS = 3
 """Most passes of the test; each pass looks only at the points the previous ones kept."""
-
-DEFAULT_RATIO = 2.5
-"""Spacing over context median above which a point is an outlier (the settings' default)."""
 
 FLAT_NEIGHBOURS = 16
 """Nearest points whose spread, with the point's own position, decides whether it is flat."""
@@ -57,11 +55,6 @@ OFF_PLANE = 1.0
 """Distance from the plane of the nearest unflagged points, over their in-plane spread (root of
 the two larger covariance eigenvalues), below which a flagged point with a flat neighbourhood
 is surface."""
-
-POLICIES = ("auto", "drop", "keep")
-"""What reconstruction does with the outliers found: ``drop`` them, ``keep`` them, or ``auto``:
-drop them when they are at least :data:`AUTO_SHARE` of the cloud or when they stretch the
-bounding box (:data:`AUTO_SHRINK`), else keep them."""
 
 AUTO_SHARE = 0.01
 """In ``auto``, the share of outliers from which they are dropped: a few isolated points cost a
@@ -86,7 +79,7 @@ _SURFACE_SHARE = 0.1
 """Share of the stage's progress for sparing the flagged points that are surface."""
 
 
-def find_outliers(points: np.ndarray, ratio: float = DEFAULT_RATIO,
+def find_outliers(points: np.ndarray, ratio: float = DEFAULT_OUTLIER_RATIO,
                   progress: Optional[ProgressFn] = None,
                   cancel: Optional[CancelFn] = None) -> np.ndarray:
     """Which points are isolated from the surface the others describe.

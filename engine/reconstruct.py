@@ -78,8 +78,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     cancel : callable ``() -> bool``, optional
         Polled between batches; when it returns True, :class:`Cancelled` is raised.
     udf_source : ``"network"`` or ``"nearest"``, optional
-        The backbone, or the non-learned distance to the nearest input point. Defaults to the
-        settings' ``udf_source`` when they have one, else ``"network"``.
+        The backbone, or the non-learned distance to the nearest input point; overrides the
+        settings' ``udf_source``.
 
     Returns
     -------
@@ -99,7 +99,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     started = time.perf_counter()
     progress = progress or no_progress
     settings = ReconstructSettings.coerce(settings)
-    udf_source = udf_source or getattr(settings, "udf_source", "network")
+    udf_source = udf_source or settings.udf_source
     if udf_source not in UDF_SOURCES:
         raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")
     if isinstance(cloud, PointCloud):

@@ -1,83 +1,205 @@
-"""Settings of one reconstruction: one dataclass shared by the CLI, Blender, batch and benchmark."""
+"""Settings of one reconstruction: one dataclass shared by the CLI, Blender, batch and benchmark.
+
+Each field says what it is in its metadata (:func:`setting`): the panel's label and tooltip, the
+command line's help, the allowed range or choices. The command-line flags
+(``engine/commands/settings_args.py``), the Blender panel's properties (``ui/properties.py``)
+and :meth:`ReconstructSettings.validate` are all built from the fields, so a new field added
+here appears everywhere with no other edit.
+"""
 
 import math
 import numbers
+import struct
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
+from typing import Optional, Tuple
 
 from .errors import InputError
-from .outliers import DEFAULT_RATIO as DEFAULT_OUTLIER_RATIO
-from .outliers import POLICIES as OUTLIER_POLICIES
 
-RADIUS_MODES = ("fixed", "curvature", "learned")
-DEVICES = ("auto", "cpu", "cuda")
 MAX_SEED = 2 ** 32 - 1
 """Seeds are whole numbers in [0, MAX_SEED] (what numpy's generators accept)."""
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One allowed value of a setting, with the panel's name and tooltip for it."""
+
+    value: str
+    label: str
+    description: str
+
+
+@dataclass(frozen=True)
+class SettingInfo:
+    """What the CLI, the panel and validation know about one setting.
+
+    label, description: the panel's name and tooltip, in an artist's words.
+    help: the command line's help (the tooltip when empty); the default is appended.
+    choices: the allowed values (an enum in the panel, ``choices`` on the command line).
+    low, high: the allowed range, inclusive (None: unbounded).
+    ui: extra keywords of the Blender property (soft limits, step, precision, subtype).
+    """
+
+    label: str
+    description: str = ""
+    help: str = ""
+    choices: Tuple[Choice, ...] = ()
+    low: Optional[float] = None
+    high: Optional[float] = None
+    ui: Tuple[Tuple[str, object], ...] = ()
+
+    @property
+    def cli_help(self) -> str:
+        return self.help or self.description
+
+    @property
+    def values(self) -> tuple:
+        return tuple(choice.value for choice in self.choices)
+
+
+def setting(default, label: str, description: str, *, help: str = "", choices=(), low=None,
+            high=None, **ui):
+    """A field of :class:`ReconstructSettings` with its :class:`SettingInfo`; extra keywords
+    go to the Blender property as they are (``soft_max=0.06``, ``precision=3``)."""
+    info = SettingInfo(label, description, help, tuple(choices), low, high,
+                       tuple(sorted(ui.items())))
+    return field(default=default, metadata={"setting": info})
+
+
+def setting_info(item) -> SettingInfo:
+    """The :class:`SettingInfo` of a dataclass field; a field declared without :func:`setting`
+    gets its name as label and nothing else."""
+    info = item.metadata.get("setting")
+    return info if info is not None else SettingInfo(item.name.replace("_", " ").title())
+
+
+RADIUS_MODE_CHOICES = (
+    Choice("fixed", "Fixed",
+           "One ball radius everywhere. Fast and predictable; thin parts and fine detail may "
+           "blur when the radius is large"),
+    Choice("curvature", "Curvature",
+           "Smaller balls where the surface bends, larger ones where it is flat"),
+    Choice("learned", "Learned",
+           "A small network picks the ball size for each spot from the points around it: "
+           "smaller where the scan looks clean, larger where it looks noisy or sparse"),
+)
+DEVICE_CHOICES = (
+    Choice("auto", "Auto", "Use the graphics card when PyTorch with CUDA is installed, else the "
+                           "CPU"),
+    Choice("cpu", "CPU", "Always compute on the processor"),
+    Choice("cuda", "CUDA", "Compute on an NVIDIA graphics card (needs PyTorch with CUDA and a "
+                           "GPU)"),
+)
+OUTLIER_CHOICES = (
+    Choice("auto", "Auto", "Drop stray points when they are at least 1 % of the cloud or when "
+                           "they more than double its size; keep a cleaner cloud as it is"),
+    Choice("drop", "Drop", "Always drop points isolated from the surface"),
+    Choice("keep", "Keep", "Use every point"),
+)
+UDF_SOURCE_CHOICES = (
+    Choice("network", "Network", "The learned network judges the distance to the surface"),
+    Choice("nearest", "Nearest Point", "The distance to the nearest point, without the network "
+                                       "(a baseline: rougher on noisy scans)"),
+)
+
+RADIUS_MODES = tuple(choice.value for choice in RADIUS_MODE_CHOICES)
+DEVICES = tuple(choice.value for choice in DEVICE_CHOICES)
+"""The device settings of the reconstruction and of the mesher."""
+OUTLIER_POLICIES = tuple(choice.value for choice in OUTLIER_CHOICES)
+"""What reconstruction does with the outliers found (:mod:`.outliers`): ``drop`` them, ``keep``
+them, or ``auto``: drop them when they are at least ``AUTO_SHARE`` of the cloud or when they
+stretch the bounding box (``AUTO_SHRINK``), else keep them."""
+UDF_SOURCES = tuple(choice.value for choice in UDF_SOURCE_CHOICES)
+
+DEFAULT_OUTLIER_RATIO = 2.5
+"""Spacing over context median above which a point is an outlier (:mod:`.outliers`)."""
 
 
 @dataclass
 class ReconstructSettings:
     """How to reconstruct. All lengths are in the unit frame (bounding box longest side 1).
 
-    radius_mode: how the backbone's ball radius is chosen per query: ``fixed`` (one radius, as
-        LoSF-UDF), ``curvature`` (smaller where the surface bends, as GeoLA) or ``learned``
-        (the selector network predicts it).
-    radius: the ball radius of ``fixed`` mode.
-    parent_radius: R, the radius of the parent ball the curvature and learned modes look at.
-    rho_min, rho_max: the per-query radius stays in [rho_min * R, rho_max * R].
-    resolution: grid cells along the longest side of the bounding box.
-    device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
-    seed: every random choice is drawn from this seed, so results repeat on CPU.
-    min_component_faces: drop output pieces with fewer faces (0 keeps everything).
-    outliers: what to do with points isolated from the surface (:mod:`.outliers`): ``drop``
-        them before reconstructing, ``keep`` them, or ``auto``: drop them when they are at
-        least 1 % of the cloud (a scan with strays), else keep them (on a clean scan the few
-        points flagged are more often the sparse edge of the scan).
-    outlier_ratio: a point is isolated when its spacing to its nearest neighbours is more than
-        this many times that of the points around it.
+    Each field's metadata says what it means (:func:`setting_info`).
     """
 
-    radius_mode: str = "fixed"
-    radius: float = 0.018
-    parent_radius: float = 0.024
-    rho_min: float = 0.5
-    rho_max: float = 1.0
-    resolution: int = 256
-    device: str = "auto"
-    seed: int = 0
-    min_component_faces: int = 0
-    outliers: str = "auto"
-    outlier_ratio: float = DEFAULT_OUTLIER_RATIO
+    radius_mode: str = setting(
+        "fixed", "Radius Mode",
+        "How big a neighbourhood of points is used to judge the distance to the surface at "
+        "each spot",
+        help="how the backbone's ball radius is chosen per query: fixed (one radius, as "
+             "LoSF-UDF), curvature (smaller where the surface bends) or learned (the selector "
+             "network predicts it)",
+        choices=RADIUS_MODE_CHOICES)
+    radius: float = setting(
+        0.018, "Radius",
+        "Neighbourhood size as a fraction of the cloud's longest side. Larger fills holes and "
+        "smooths noise; smaller keeps thin parts and detail",
+        help="ball radius of the fixed mode, unit frame",
+        low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
+    parent_radius: float = setting(
+        0.024, "Largest Radius",
+        "The biggest neighbourhood any spot may use, as a fraction of the cloud's longest "
+        "side. Each spot gets a radius between Range Min and Max times this. Larger fills "
+        "holes and smooths noise; smaller keeps thin parts and detail",
+        help="parent ball radius R of the curvature and learned modes, unit frame",
+        low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
+    rho_min: float = setting(
+        0.5, "Min", "Smallest radius a spot may get, as a share of the Largest Radius",
+        help="smallest radius as a fraction of R",
+        low=0.05, high=1, step=1, precision=2, subtype="FACTOR")
+    rho_max: float = setting(
+        1.0, "Max", "Biggest radius a spot may get, as a share of the Largest Radius",
+        help="largest radius as a fraction of R",
+        low=0.05, high=1, step=1, precision=2, subtype="FACTOR")
+    resolution: int = setting(
+        256, "Resolution",
+        "Grid cells along the cloud's longest side. Higher keeps finer detail but takes longer "
+        "and uses more memory (about 8x per doubling)",
+        help="grid cells along the longest side of the bounding box",
+        low=32, high=1024, soft_min=64, soft_max=512)
+    device: str = setting(
+        "auto", "Device", "Where the neural network runs",
+        help="where the networks run: auto (CUDA when PyTorch sees a GPU), cpu or cuda",
+        choices=DEVICE_CHOICES)
+    seed: int = setting(
+        0, "Seed", "Same cloud, same settings and same seed give the same mesh",
+        help=f"seed of the random choices, 0 to {MAX_SEED}; every stage is deterministic, "
+             f"so the mesh is the same for every seed",
+        low=0, high=MAX_SEED)
+    min_component_faces: int = setting(
+        0, "Min Piece Faces",
+        "Delete loose pieces of the result with fewer faces than this (0 keeps every piece)",
+        help="drop output pieces with fewer faces (0 keeps all)",
+        low=0, soft_max=10000)
+    outliers: str = setting(
+        "auto", "Outliers", "What to do with stray points floating off the surface",
+        help="points isolated from the surface: drop them, keep them, or auto: drop them when "
+             "they are at least 1 % of the cloud or stretch its bounding box more than 2x",
+        choices=OUTLIER_CHOICES)
+    outlier_ratio: float = setting(
+        DEFAULT_OUTLIER_RATIO, "Outlier Ratio",
+        "A point is stray when its gap to its neighbours is more than this many times that of "
+        "the points around it (lower finds more)",
+        help="a point is isolated when its gap to its neighbours is more than this many times "
+             "that of the points around it (lower finds more)",
+        low=1.5, high=20, step=10, precision=1)
+    udf_source: str = setting(
+        "network", "Distances",
+        "Where the distances to the surface come from: the network, or the nearest point (a "
+        "baseline without the network)",
+        help="the learned backbone, or the distance to the nearest input point (a non-learned "
+             "baseline)",
+        choices=UDF_SOURCE_CHOICES)
 
     def validate(self) -> "ReconstructSettings":
         """Raise :class:`InputError` with a clear message when a setting is out of range or of
         the wrong type (a string resolution, a float or negative seed, ...)."""
         for item in fields(self):
-            _check_type(item.name, getattr(self, item.name), type(item.default))
-        if self.radius_mode not in RADIUS_MODES:
-            raise InputError(f"radius mode must be one of {', '.join(RADIUS_MODES)}, "
-                             f"not {self.radius_mode!r}")
-        if self.device not in DEVICES:
-            raise InputError(f"device must be one of {', '.join(DEVICES)}, not {self.device!r}")
-        if not 0.001 <= self.radius <= 0.2:
-            raise InputError(f"radius {self.radius} is outside [0.001, 0.2] (unit frame)")
-        if not 0.001 <= self.parent_radius <= 0.2:
-            raise InputError(f"parent radius {self.parent_radius} is outside [0.001, 0.2]")
-        if not 0.05 <= self.rho_min <= self.rho_max <= 1.0:
-            raise InputError(f"need 0.05 <= rho_min <= rho_max <= 1, got "
-                             f"rho_min={self.rho_min}, rho_max={self.rho_max}")
-        if not 32 <= self.resolution <= 1024:
-            raise InputError(f"resolution {self.resolution} is outside [32, 1024]")
-        if not 0 <= self.seed <= MAX_SEED:
-            raise InputError(f"seed {self.seed} is outside [0, {MAX_SEED}]; give a whole number "
-                             f"from 0 to {MAX_SEED}")
-        if self.min_component_faces < 0:
-            raise InputError(f"min_component_faces must be >= 0, not {self.min_component_faces}")
-        if self.outliers not in OUTLIER_POLICIES:
-            raise InputError(f"outliers must be one of {', '.join(OUTLIER_POLICIES)}, "
-                             f"not {self.outliers!r}")
-        if not 1.5 <= self.outlier_ratio <= 20:
-            raise InputError(f"outlier ratio {self.outlier_ratio} is outside [1.5, 20]")
+            _check_value(item.name, getattr(self, item.name), type(item.default),
+                         setting_info(item))
+        if self.rho_min > self.rho_max:
+            raise InputError(f"need rho_min <= rho_max, got rho_min={self.rho_min}, "
+                             f"rho_max={self.rho_max}")
         return self
 
     def to_dict(self) -> dict:
@@ -108,13 +230,46 @@ class ReconstructSettings:
             raise InputError(f"unknown settings: {', '.join(sorted(unknown))}")
         return cls(**values).validate()
 
+    @classmethod
+    def from_attributes(cls, source, single_precision: bool = False) -> "ReconstructSettings":
+        """Validated settings read from the same-named attributes of ``source`` (an argparse
+        namespace, a Blender property group).
 
-def _check_type(name: str, value, kind: type) -> None:
-    """Refuse a setting of the wrong type: integers (Python or numpy) for int settings, never
-    floats, which would be truncated silently; real finite numbers for float settings; strings
-    for str settings. Booleans are never numbers here."""
+        single_precision: the floats were stored in single precision (Blender's float
+        properties); each is read back as the shortest decimal that rounds to it, so 0.018
+        reaches the engine as 0.018, not 0.017999999225139618.
+        """
+        values = {item.name: getattr(source, item.name) for item in fields(cls)}
+        if single_precision:
+            values = {name: _shortest_single(value) if type(value) is float else value
+                      for name, value in values.items()}
+        return cls.from_dict(values)
+
+
+def _shortest_single(value: float) -> float:
+    """The decimal with the fewest digits whose single-precision value is ``value``'s."""
+    if not math.isfinite(value):
+        return value
+    single = struct.pack("<f", value)
+    for digits in range(1, 10):
+        candidate = float(f"{value:.{digits}g}")
+        if struct.pack("<f", candidate) == single:
+            return candidate
+    return value
+
+
+def _check_value(name: str, value, kind: type, info: SettingInfo) -> None:
+    """Refuse a setting of the wrong type, outside its choices or outside its range.
+
+    Integers (Python or numpy) for int settings, never floats, which would be truncated
+    silently; real finite numbers for float settings; strings for str settings. Booleans are
+    never numbers here.
+    """
     label = name.replace("_", " ")
-    if kind is int:
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise InputError(f"{label} must be True or False, not {value!r}")
+    elif kind is int:
         if isinstance(value, bool) or not isinstance(value, numbers.Integral):
             raise InputError(f"{label} must be a whole number, not {value!r} "
                              f"({type(value).__name__})")
@@ -125,3 +280,12 @@ def _check_type(name: str, value, kind: type) -> None:
             raise InputError(f"{label} must be a finite number, not {value!r}")
     elif kind is str and not isinstance(value, str):
         raise InputError(f"{label} must be a string, not {value!r} ({type(value).__name__})")
+    if info.choices and value not in info.values:
+        raise InputError(f"{label} must be one of {', '.join(info.values)}, not {value!r}")
+    if info.low is not None and info.high is not None:
+        if not info.low <= value <= info.high:
+            raise InputError(f"{label} {value} is outside [{info.low}, {info.high}]")
+    elif info.low is not None and value < info.low:
+        raise InputError(f"{label} must be >= {info.low}, not {value}")
+    elif info.high is not None and value > info.high:
+        raise InputError(f"{label} must be <= {info.high}, not {value}")

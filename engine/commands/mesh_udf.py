@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from ..errors import InputError
+from ..settings import DEVICES, MAX_SEED
 
 
 def add_arguments(parser) -> None:
@@ -20,14 +21,15 @@ def add_arguments(parser) -> None:
                         help="marching-cubes level: '1.0h' in voxels, or an absolute distance "
                              "(default: automatic, about 1 voxel)")
     parser.add_argument("--iterations", type=int, default=None,
-                        help="optimisation iterations (default 200)")
+                        help="optimisation iterations (default: the mesher's)")
     parser.add_argument("--no-cut", action="store_true",
-                        help="keep the double layer (no min-cut)")
+                        help="keep both layers of the double cover")
     parser.add_argument("--min-component-faces", type=int, default=0,
                         help="drop output pieces with fewer faces (default 0: keep all)")
     parser.add_argument("--seed", type=int, default=0,
-                        help="seed of the min-cut, 0 to 4294967295 (default 0)")
-    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                        help=f"seed of the mesher, 0 to {MAX_SEED}; the mesher draws no random "
+                             f"numbers, so the mesh is the same for every seed (default 0)")
+    parser.add_argument("--device", default="auto", choices=DEVICES,
                         help="where the optimisation runs: auto (a CUDA GPU when PyTorch sees "
                              "one, else numpy on the CPU), cpu or cuda (default auto)")
 
@@ -86,8 +88,8 @@ def run(args) -> int:
 
     check_outputs([args.output], [args.grid])
     check_device(args.device)
-    if not 0 <= args.seed <= 2 ** 32 - 1:
-        raise InputError(f"--seed must be a whole number from 0 to 4294967295, got {args.seed}")
+    if not 0 <= args.seed <= MAX_SEED:
+        raise InputError(f"--seed must be a whole number from 0 to {MAX_SEED}, got {args.seed}")
     if args.iterations is not None and args.iterations < 0:
         raise InputError(f"--iterations must be >= 0, got {args.iterations}")
     if args.min_component_faces < 0:

@@ -16,50 +16,17 @@ import threading
 import time
 
 from ..errors import Cancelled, InputError
-from ..settings import DEVICES, OUTLIER_POLICIES, RADIUS_MODES, ReconstructSettings
+from ..settings import ReconstructSettings
+from .settings_args import add_settings_arguments
 
 
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
-    defaults = ReconstructSettings()
     parser.add_argument("input", help="point cloud or mesh file (.ply, .obj, .off, .stl, .xyz, "
                                       ".pts, .txt, .npy, .npz, .las, .laz)")
     parser.add_argument("output", help="mesh file to write (.ply, .obj, .off or .stl); never "
                                        "the input")
-    parser.add_argument("--resolution", type=int, default=defaults.resolution,
-                        help=f"grid cells along the longest side (default {defaults.resolution})")
-    parser.add_argument("--radius-mode", choices=RADIUS_MODES, default=defaults.radius_mode,
-                        help=f"how the ball radius is chosen (default {defaults.radius_mode})")
-    parser.add_argument("--radius", type=float, default=defaults.radius,
-                        help=f"ball radius of the fixed mode, unit frame "
-                             f"(default {defaults.radius})")
-    parser.add_argument("--parent-radius", type=float, default=defaults.parent_radius,
-                        help=f"parent ball radius R of the curvature and learned modes "
-                             f"(default {defaults.parent_radius})")
-    parser.add_argument("--rho-min", type=float, default=defaults.rho_min,
-                        help=f"smallest radius as a fraction of R (default {defaults.rho_min})")
-    parser.add_argument("--rho-max", type=float, default=defaults.rho_max,
-                        help=f"largest radius as a fraction of R (default {defaults.rho_max})")
-    parser.add_argument("--device", choices=DEVICES, default=defaults.device,
-                        help=f"where the networks run (default {defaults.device})")
-    parser.add_argument("--seed", type=int, default=defaults.seed,
-                        help=f"seed of the random choices, 0 to 4294967295: only the mesher "
-                             f"draws any (seed faces where it splits a double layer); every "
-                             f"other stage is deterministic, so many inputs give the same mesh "
-                             f"for every seed (default {defaults.seed})")
-    parser.add_argument("--min-component-faces", type=int, default=defaults.min_component_faces,
-                        help="drop output pieces with fewer faces (default 0: keep all)")
-    parser.add_argument("--outliers", choices=OUTLIER_POLICIES, default=defaults.outliers,
-                        help="points isolated from the surface: drop them, keep them, or auto: "
-                             "drop them when they are at least 1 %% of the cloud (default "
-                             f"{defaults.outliers})")
-    parser.add_argument("--outlier-ratio", type=float, default=defaults.outlier_ratio,
-                        help="a point is isolated when its gap to its neighbours is more than "
-                             "this many times that of the points around it (default "
-                             f"{defaults.outlier_ratio}; lower finds more)")
-    parser.add_argument("--udf-source", choices=("network", "nearest"), default="network",
-                        help="the learned backbone, or the distance to the nearest input point "
-                             "(a non-learned baseline); default network")
+    add_settings_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="print only errors")
 
 
@@ -103,12 +70,7 @@ def run(args) -> int:
     from .preflight import check_device, check_outputs, check_result
 
     started = time.perf_counter()
-    settings = ReconstructSettings(
-        radius_mode=args.radius_mode, radius=args.radius, parent_radius=args.parent_radius,
-        rho_min=args.rho_min, rho_max=args.rho_max, resolution=args.resolution,
-        device=args.device, seed=args.seed, min_component_faces=args.min_component_faces,
-        outliers=args.outliers, outlier_ratio=args.outlier_ratio,
-    ).validate()
+    settings = ReconstructSettings.from_attributes(args)
     check_outputs([args.output], [args.input])
     check_device(settings.device)
     progress = _StderrProgress(args.quiet)
@@ -126,8 +88,7 @@ def run(args) -> int:
     try:
         cloud = read_point_cloud(args.input)
         try:
-            result = reconstruct(cloud, settings, progress, stop.is_set,
-                                 udf_source=args.udf_source)
+            result = reconstruct(cloud, settings, progress, stop.is_set)
         except InputError as error:  # the cloud is refused (NaN, too few points, a line...)
             progress.end_line()
             raise InputError(f"{os.path.basename(args.input)}: {error}") from None

@@ -15,13 +15,12 @@ from ..devices import resolve_device
 from ..errors import InputError
 from ..geometry import Mesh
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+from ..settings import DEVICES
 from .cleanup import clean_mesh
 from .grid_field import UDFGrid
 from .layers import choose_layer, close_pinholes, drop_flaps, extend_rims, peel_lips
 from .marching import double_cover
-from .optimize import optimize_cover
-
-DEVICES = ("auto", "cpu", "cuda")
+from .optimize import ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START, optimize_cover
 
 
 @dataclass
@@ -46,10 +45,10 @@ class MeshingSettings:
     """
 
     iso: Optional[float] = None
-    iterations: int = 200
-    laplacian_weight: float = 4.0
-    lr: float = 0.05
-    normal_start: float = 0.75
+    iterations: int = ITERATIONS
+    laplacian_weight: float = LAPLACIAN_WEIGHT
+    lr: float = LR
+    normal_start: float = NORMAL_START
     cut: bool = True
     min_component_faces: int = 0
     seed: int = 0

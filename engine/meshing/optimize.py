@@ -32,6 +32,9 @@ STALL_MEAN = 1e-3  # voxels: the mean vertex / centroid distance improved less t
 STALL_MAX = 1e-2  # voxels: and the largest one improved less than this
 SPLIT_VERTICES = 32768  # covers with fewer vertices run on one thread
 BETA1, BETA2, EPS = 0.9, 0.999, 1e-8  # VectorAdam
+# The defaults of the optimisation (and of MeshingSettings): iterations of both stages, stage 1's
+# smoothing weight (voxel units), peak step (voxels per iteration), start of stage 2 (fraction)
+ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START = 200, 4.0, 0.05, 0.75
 
 
 @dataclass
@@ -201,9 +204,10 @@ class _Cover:
         self.capture = True
 
 
-def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field, iterations: int = 400,
-                   laplacian_weight: float = 16.0, lr: float = 0.05,
-                   normal_start: float = 0.75, progress: Optional[ProgressFn] = None,
+def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
+                   iterations: int = ITERATIONS, laplacian_weight: float = LAPLACIAN_WEIGHT,
+                   lr: float = LR, normal_start: float = NORMAL_START,
+                   progress: Optional[ProgressFn] = None,
                    cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
                    early_stop: bool = True, threads: Optional[int] = None):
     """Pull a double cover onto the zero set of ``field``.

@@ -14,7 +14,8 @@ import numpy as np
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
 from .grid_field import BRICK, UDFGrid
-from .optimize import StallCheck, distance_summary, final_stats, learning_rate
+from .optimize import (BETA1, BETA2, EPS, ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START,
+                       StallCheck, distance_summary, final_stats, learning_rate)
 
 _CELLS = BRICK ** 3
 
@@ -89,8 +90,9 @@ def _face_normals(g, faces):
 
 
 def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid,
-                         iterations: int = 400, laplacian_weight: float = 16.0,
-                         lr: float = 0.05, normal_start: float = 0.75,
+                         iterations: int = ITERATIONS,
+                         laplacian_weight: float = LAPLACIAN_WEIGHT, lr: float = LR,
+                         normal_start: float = NORMAL_START,
                          progress: Optional[ProgressFn] = None,
                          cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
                          early_stop: bool = True, device: str = "cuda"):
@@ -117,7 +119,7 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
     ratio = n / max(m, 1)
     stage2 = int(round(normal_start * iterations))
     quiet = max(stage2, iterations // 2)
-    beta1, beta2, eps = 0.9, 0.999, 1e-8
+    beta1, beta2, eps = BETA1, BETA2, EPS
     mom = torch.zeros_like(g)
     vel = torch.zeros(n, dtype=g.dtype, device=device)
     weight = torch.ones((n, 1), dtype=g.dtype, device=device)
