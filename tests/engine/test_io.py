@@ -60,12 +60,36 @@ def test_written_mesh_reads_back_with_normals_and_colours(tmp_path, extension, c
         np.testing.assert_allclose(back.colors, mesh.colors, atol=0.5 / 255)
 
 
-@pytest.mark.parametrize("extension", ["ply", "obj", "off"])
+@pytest.mark.parametrize("extension, channels", [
+    ("glb", None), ("glb", 3), ("glb", 4), ("gltf", 4), ("stl", None)])
+def test_trimesh_formats_read_back_with_normals_and_colours(tmp_path, extension, channels):
+    """GLB and glTF hold float32 positions and normals and 8-bit colours; STL only triangles."""
+    mesh = _mesh(np.random.default_rng(1), colors=channels)
+    path = tmp_path / f"shape.{extension}"
+    write_mesh(path, mesh)
+    back = read_mesh(path)
+    if extension == "stl":  # corners merged into shared vertices
+        np.testing.assert_allclose(back.vertices[back.faces], mesh.vertices[mesh.faces],
+                                   rtol=1e-7)
+        assert back.normals is None and back.colors is None
+        return
+    np.testing.assert_allclose(back.vertices, mesh.vertices, rtol=1e-7)
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    np.testing.assert_allclose(back.normals, mesh.normals, atol=1e-6)
+    if channels is None:
+        assert back.colors is None
+    else:
+        assert back.colors.shape == (12, channels)
+        np.testing.assert_allclose(back.colors, mesh.colors, atol=0.5 / 255)
+
+
+@pytest.mark.parametrize("extension", ["ply", "obj", "off", "glb"])
 def test_points_only_mesh_round_trips_without_faces(tmp_path, extension):
     points = np.random.default_rng(2).uniform(-1, 1, (50, 3))
     write_mesh(tmp_path / f"cloud.{extension}", Mesh(points, np.zeros((0, 3), np.int64)))
     cloud = read_point_cloud(tmp_path / f"cloud.{extension}")
-    np.testing.assert_array_equal(cloud.points, points)
+    exact = extension != "glb"  # glTF positions are float32
+    np.testing.assert_allclose(cloud.points, points, rtol=0 if exact else 1e-7)
     assert cloud.normals is None and cloud.colors is None
     assert read_mesh(tmp_path / f"cloud.{extension}").faces.shape == (0, 3)
 
@@ -76,6 +100,53 @@ def test_write_refuses_unknown_extension_and_unwritable_path(tmp_path):
         write_mesh(tmp_path / "shape.abc", mesh)
     with pytest.raises(InputError, match=r"^shape\.ply: cannot be written"):
         write_mesh(tmp_path / "no_such_folder" / "shape.ply", mesh)
+
+
+# ---------------------------------------------------------------- checked by trimesh
+
+
+def _closed_sphere():
+    """A closed, consistently wound icosphere (642 vertices) far from the origin."""
+    trimesh = pytest.importorskip("trimesh")
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.0)
+    return Mesh(sphere.vertices + [500000.0, 4000000.0, 100.0], sphere.faces,
+                sphere.vertex_normals, np.full((len(sphere.vertices), 3), 0.5, np.float32))
+
+
+@pytest.mark.parametrize("extension", ["ply", "obj", "off", "stl", "glb"])
+def test_trimesh_reads_our_files_as_one_closed_consistently_wound_shell(tmp_path, extension):
+    trimesh = pytest.importorskip("trimesh")
+    mesh = _closed_sphere()
+    write_mesh(tmp_path / f"sphere.{extension}", mesh)
+    theirs = trimesh.load(tmp_path / f"sphere.{extension}", force="mesh")  # merges corners
+    assert len(theirs.vertices) == 642 and len(theirs.faces) == 1280
+    assert theirs.is_watertight and theirs.is_winding_consistent
+    assert theirs.euler_number == 2
+    assert theirs.volume > 0, "faces wound outward"
+    exact = extension in ("ply", "obj", "off")
+    assert np.abs(np.sort(theirs.vertices, axis=0)
+                  - np.sort(mesh.vertices, axis=0)).max() <= (0 if exact else 0.5)
+
+
+@pytest.mark.parametrize("extension, options", [
+    ("ply", {"encoding": "binary"}), ("ply", {"encoding": "ascii"}),
+    ("obj", {"include_normals": True, "digits": 12}), ("off", {}), ("stl", {}),
+    ("stl_ascii", {}), ("glb", {"include_normals": True})])
+def test_files_written_by_trimesh_read_back_as_the_same_mesh(tmp_path, extension, options):
+    trimesh = pytest.importorskip("trimesh")
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    sphere.visual.vertex_colors = np.tile([[255, 51, 0, 255]], (len(sphere.vertices), 1))
+    path = tmp_path / f"sphere.{extension.split('_')[0]}"
+    data = sphere.export(file_type=extension, **options)
+    path.write_bytes(data if isinstance(data, bytes) else data.encode())
+    ours = read_mesh(path)
+    again = trimesh.Trimesh(ours.vertices, ours.faces, process=False)
+    assert again.is_watertight and again.is_winding_consistent and again.euler_number == 2
+    assert len(ours.faces) == len(sphere.faces) and len(ours.vertices) == len(sphere.vertices)
+    np.testing.assert_allclose(ours.vertices[ours.faces], sphere.vertices[sphere.faces],
+                               atol=1e-6)
+    if extension in ("ply", "obj", "glb"):
+        np.testing.assert_allclose(ours.colors[:, :3], [[1.0, 0.2, 0.0]] * len(ours.vertices))
 
 
 # ---------------------------------------------------------------- PLY variants
@@ -327,7 +398,7 @@ def test_missing_file_folder_and_unsupported_format(tmp_path):
     _fail(tmp_path / "folder.ply", "is a folder")
     (tmp_path / "scan.e57").write_bytes(b"ASTM-E57")
     _fail(tmp_path / "scan.e57",
-          "unsupported format; use PLY, OBJ, OFF, STL, XYZ, PTS, TXT, NPY, NPZ, LAS or LAZ")
+          "unsupported format; use PLY, OBJ, OFF, STL, GLB, GLTF, XYZ, PTS, TXT, NPY, NPZ, LAS or LAZ")
 
 
 @pytest.mark.parametrize("name", ["e.ply", "e.obj", "e.off", "e.xyz", "e.pts", "e.txt"])

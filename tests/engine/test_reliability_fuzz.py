@@ -1,6 +1,6 @@
-"""Issue 24: a seeded fuzz of the readers over a few hundred mutated files.
+"""A seeded fuzz of the readers over a few hundred mutated files.
 
-Small valid PLY (binary and ASCII), OBJ, OFF, XYZ, NPY, NPZ, LAS and LAZ files are truncated,
+Small valid PLY (binary and ASCII), OBJ, OFF, STL, GLB, XYZ, NPY, NPZ, LAS and LAZ files are truncated,
 have random bytes inserted or overwritten, or get absurd counts in their headers. Every mutated
 file must give a point cloud or one InputError message naming the file: never another
 exception, an abort (lazrs once aborted the process on a 32-byte insertion) or a hang. The
@@ -35,7 +35,9 @@ def _seeds(folder: Path) -> list:
     paths = []
     for name, mesh in (("mesh.ply", Mesh(points, faces, normals, colors)),
                        ("mesh.obj", Mesh(points, faces, normals)),
-                       ("mesh.off", Mesh(points, faces, None, colors))):
+                       ("mesh.off", Mesh(points, faces, None, colors)),
+                       ("mesh.stl", Mesh(points, faces)),
+                       ("mesh.glb", Mesh(points, faces, normals, colors))):
         write_mesh(folder / name, mesh)
         paths.append(folder / name)
     ascii_ply = ["ply", "format ascii 1.0", "element vertex 300", "property float x",
@@ -114,6 +116,7 @@ _CHILD = textwrap.dedent("""
     sys.path.insert(0, {root!r})
     from engine.errors import InputError
     from engine.io import read_point_cloud
+    import laspy, trimesh  # imported before the clock starts: a slow read is a hang, not an import
     folder = {folder!r}
     for name in json.loads(sys.argv[1]):
         print("reading", name, flush=True)
