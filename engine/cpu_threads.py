@@ -3,8 +3,8 @@
 The backbone's matrix products are small (a few thousand rows by 64 columns): a multi-threaded
 BLAS gains little on them, while the element-wise work between them runs on one core. Python
 threads over independent groups of patches use the cores better (numpy releases the GIL), with
-the BLAS held to one thread each so that they do not fight: on the 2-core machine the backbone
-took 88 µs per query serially and 52 µs in two threads (docs/performance.md).
+the BLAS held to one thread each so that they do not fight (docs/performance.md has the
+figures).
 
 The BLAS limit needs ``threadpoolctl`` (a small pure-Python package in requirements.txt and in
 the Blender zips); without it the threads still run, with the BLAS's own threads.

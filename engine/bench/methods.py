@@ -74,7 +74,7 @@ def make_poisson(depth: int = 9, knn: int = 30, orient_k: int = 30, trim_quantil
         pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=knn))
         # Orient on a copy jittered by 1e-4 of the extent: on exactly coplanar points (a clean
         # room scan) the orientation stalls, presumably in the Delaunay step that connects its
-        # graph (> 2.5 min unjittered, 7 s jittered). The solve uses the original points.
+        # graph. The solve uses the original points.
         points = np.asarray(pcd.points)
         extent = float(np.ptp(points, axis=0).max()) or 1.0
         jitter = np.random.default_rng(0).normal(0.0, 1e-4 * extent, points.shape)
