@@ -57,23 +57,13 @@ WRITE_FORMATS = tuple(extension.upper() for extension in _WRITERS)
 
 
 def read_point_cloud(path) -> PointCloud:
-    """Read the points of a file (a mesh file gives its vertices).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A file whose extension is one of ``READ_FORMATS`` (case-insensitive).
+    """Read the points of a file, as :func:`read_mesh` does (a mesh file gives its vertices).
 
     Returns
     -------
     PointCloud
         points (N, 3) float64 in the file's units; normals (N, 3) float64 or None;
         colors (N, 3) or (N, 4) float32 in [0, 1] or None.
-
-    Raises
-    ------
-    InputError
-        The file is missing, unsupported, unreadable, corrupt, truncated or has no points.
     """
     return read_mesh(path).as_point_cloud()
 
