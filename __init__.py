@@ -11,17 +11,19 @@ starts, never while the extension is enabled.
 def _modules():
     """The modules whose ``CLASSES`` are registered, in order: properties first (the panel and
     operators read them), panels last."""
-    from .operators import reconstruct
+    from .operators import install, reconstruct
     from .ui import panel, preferences, properties
 
-    return preferences, properties, reconstruct, panel
+    return preferences, properties, install, reconstruct, panel
 
 
 def register():
     import bpy
 
+    from .operators import install
     from .ui import properties
 
+    install.add_to_path()  # packages installed from the preferences, if any
     for module in _modules():
         for cls in module.CLASSES:
             bpy.utils.register_class(cls)
@@ -32,7 +34,10 @@ def register():
 def unregister():
     import bpy
 
+    from .operators import install
+
     del bpy.types.Scene.udf_reconstruction
     for module in reversed(_modules()):
         for cls in reversed(module.CLASSES):
             bpy.utils.unregister_class(cls)
+    install.remove_from_path()

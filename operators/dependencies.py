@@ -24,7 +24,8 @@ DEPENDENCIES = (
 )
 
 
-def _found(module: str) -> bool:
+def is_found(module: str) -> bool:
+    """Whether ``module`` can be imported (without importing it)."""
     if module in sys.modules:
         return True
     try:
@@ -43,19 +44,20 @@ def install_name(module: str) -> str:
     return top
 
 
-def missing_packages() -> list:
-    """The install names of the required packages that cannot be found, in table order."""
+def missing_packages(optional: bool = False) -> list:
+    """The install names of the required packages (and with ``optional``, of the optional ones
+    too) that cannot be found, in table order."""
     return [distribution for module, distribution, _, required in DEPENDENCIES
-            if required and not _found(module)]
+            if (required or optional) and not is_found(module)]
 
 
 def missing_message(missing) -> str:
     """What to tell the user when ``missing`` (install names) are not there."""
     names = ", ".join(missing)
     plural = "s" if len(missing) > 1 else ""
-    return (f"Missing Python package{plural}: {names}. Nothing was computed. Install the "
-            f"UDF Reconstruction zip made for your platform and Blender version (it bundles its "
-            f"packages); Preferences > Add-ons > UDF Reconstruction lists what is missing.")
+    return (f"Missing Python package{plural}: {names}. Nothing was computed. Click Install "
+            f"Missing Packages in Preferences > Add-ons > UDF Reconstruction, or install the "
+            f"extension zip made for your platform and Blender version (it bundles them).")
 
 
 def dependency_status() -> list:
@@ -64,7 +66,7 @@ def dependency_status() -> list:
     rows = []
     for module, distribution, purpose, required in DEPENDENCIES:
         version = None
-        if _found(module):
+        if is_found(module):
             try:
                 version = importlib.metadata.version(distribution)
             except importlib.metadata.PackageNotFoundError:
@@ -104,7 +106,7 @@ def gpu_available(wait: bool = False):
     with _gpu_lock:
         if _gpu["known"]:
             return _gpu["available"]
-        if not _found("torch"):
+        if not is_found("torch"):
             _gpu.update(known=True, available=False, name="")
             return False
         thread = _gpu["thread"]
@@ -128,7 +130,7 @@ def gpu_text() -> str:
         return "Looking for a GPU..."
     if available:
         return f"GPU: {_gpu['name']}" if _gpu["name"] else "GPU found"
-    if not _found("torch"):
+    if not is_found("torch"):
         return "No GPU found (needs PyTorch with CUDA); the CPU is used"
     return "No GPU found; the CPU is used"
 

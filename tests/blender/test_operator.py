@@ -8,37 +8,13 @@ import numpy as np
 import pytest
 from mathutils import Matrix
 
+from tests.blender.helpers import Reports, add_cloud, sphere_points
+
 
 RADIUS = 0.8          # of the generated sphere, local units
 SCALE = 1.5           # object scale: the world sphere has radius RADIUS * SCALE
 LOCATION = (1.0, -2.0, 0.5)
 RESOLUTION = 64
-
-
-def sphere_points(count: int, radius: float):
-    """(count, 3) points evenly spread on a sphere around the origin (Fibonacci lattice)."""
-    i = np.arange(count) + 0.5
-    polar = np.arccos(1.0 - 2.0 * i / count)
-    azimuth = np.pi * (1.0 + 5.0 ** 0.5) * i
-    return radius * np.c_[np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
-                          np.cos(polar)]
-
-
-def add_cloud(name: str, points, colors=None):
-    """A vertex-only mesh object holding ``points`` (and a ``Col`` point colour), made active."""
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(points))
-    mesh.attributes["position"].data.foreach_set(
-        "vector", np.asarray(points, dtype=np.float32).ravel())
-    if colors is not None:
-        attribute = mesh.color_attributes.new("Col", 'FLOAT_COLOR', 'POINT')
-        attribute.data.foreach_set("color", np.asarray(colors, dtype=np.float32).ravel())
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    return obj
 
 
 def colors_at(points):
@@ -53,16 +29,6 @@ def world_vertices(obj):
     obj.data.attributes["position"].data.foreach_get("vector", local)
     matrix = np.array(obj.matrix_world)
     return local.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
-
-
-class Reports:
-    """Stands in for an operator's ``report`` when a job is finished by hand."""
-
-    def __init__(self):
-        self.messages = []
-
-    def report(self, kind, message):
-        self.messages.append((set(kind), message))
 
 
 @pytest.fixture(scope="module")
@@ -156,17 +122,17 @@ def test_three_points_are_refused_with_the_engines_message(scene):
     assert len(bpy.data.objects) == before
 
 
-def test_radius_modes_not_built_yet_are_refused_with_what_to_use(scene, extension):
-    missing = set(extension.module("engine.settings").RADIUS_MODES) \
-        - extension.module("ui.properties").available_radius_modes()
-    if not missing:
-        pytest.skip("every radius mode is built")
-    add_cloud("Sphere", sphere_points(2000, 1.0))
-    scene.udf_reconstruction.radius_mode = sorted(missing)[0]
-    before = len(bpy.data.objects)
-    with pytest.raises(RuntimeError, match="not available yet; use one of: fixed"):
-        bpy.ops.udf_reconstruction.reconstruct()
-    assert len(bpy.data.objects) == before
+@pytest.mark.parametrize("mode", ["fixed", "curvature", "learned"])
+def test_every_radius_mode_of_the_panel_makes_a_sphere(scene, extension, mode):
+    assert set(extension.module("engine.settings").RADIUS_MODES) == {"fixed", "curvature",
+                                                                      "learned"}
+    add_cloud("Sphere", sphere_points(3000, 1.0))
+    scene.udf_reconstruction.radius_mode = mode
+    scene.udf_reconstruction.resolution = 32
+    assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
+    vertices = world_vertices(bpy.data.objects["Sphere_mesh"])
+    error = np.abs(np.linalg.norm(vertices, axis=1) - 1.0)
+    assert len(vertices) > 500 and error.mean() < 0.02, (mode, len(vertices), error.mean())
 
 
 def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
