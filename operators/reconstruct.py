@@ -14,7 +14,7 @@ import traceback
 import bpy
 
 from ..engine.errors import Cancelled, InputError
-from ..ui.properties import scene_settings, to_settings
+from ..engine.settings import ReconstructSettings
 from . import bridge, dependencies, wording
 
 # How often the modal operator looks at the worker's progress (seconds).
@@ -95,8 +95,8 @@ def start_job(context) -> Job:
     target = bridge.reconstruct_target(context)
     if target.source is None:
         raise InputError(wording.sentence(target.problem))
-    props = scene_settings(context.scene)
-    settings = to_settings(props)
+    props = context.scene.udf_reconstruction  # the panel's properties (ui/properties.py)
+    settings = ReconstructSettings.from_attributes(props, single_precision=True)
     _check_device(settings)
     cloud = bridge.read_point_cloud(context, target.source)
     _job = Job(target.source, cloud, settings)

@@ -37,7 +37,6 @@ import re
 import sys
 import time
 import types
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -92,7 +91,7 @@ def script_arguments() -> list:
     return sys.argv[1:]  # the bpy module (no binary) or a plain Python
 
 
-def build_parser(settings_type, choices, read_formats, write_formats):
+def build_parser(add_settings_arguments, read_formats, write_formats):
     parser = argparse.ArgumentParser(
         prog="batch_reconstruct.py",
         description="Reconstruct meshes from point-cloud files with UDF Reconstruction.")
@@ -110,10 +109,7 @@ def build_parser(settings_type, choices, read_formats, write_formats):
     group = parser.add_argument_group(
         "reconstruction settings (default: the open file's panel values, else the panel's "
         "defaults; lengths are fractions of each cloud's longest side)")
-    for field in fields(settings_type):
-        group.add_argument("--" + field.name.replace("_", "-"), dest=field.name, default=None,
-                           type=type(field.default), choices=choices.get(field.name),
-                           help=f"(panel default: {field.default})")
+    add_settings_arguments(group, use_defaults=False)
     return parser
 
 
@@ -205,9 +201,8 @@ def main() -> int:
     settings_module = importlib.import_module(package + ".engine.settings")
     preflight = importlib.import_module(package + ".engine.commands.preflight")
 
-    choices = {"radius_mode": settings_module.RADIUS_MODES, "device": settings_module.DEVICES,
-               "outliers": settings_module.OUTLIER_POLICIES}
-    parser = build_parser(settings_module.ReconstructSettings, choices, engine_io.READ_FORMATS,
+    settings_args = importlib.import_module(package + ".engine.commands.settings_args")
+    parser = build_parser(settings_args.add_settings_arguments, engine_io.READ_FORMATS,
                           engine_io.WRITE_FORMATS)
     args = parser.parse_args(script_arguments())
     if bpy is None and (args.blend or args.preview):

@@ -1,0 +1,96 @@
+"""The panel's properties are generated from ReconstructSettings' fields: every field is there
+with its label, default, range and choices; a new field appears with no edit; the Reconstruct
+operator reads them back into the engine's settings."""
+
+from dataclasses import dataclass, fields
+
+import bpy
+import numpy as np
+
+
+def test_every_setting_is_a_panel_property_with_its_label_default_and_range(scene, extension):
+    settings = extension.module("engine.settings")
+    rna = scene.udf_reconstruction.bl_rna.properties
+    for item in fields(settings.ReconstructSettings):
+        info = settings.setting_info(item)
+        prop = rna[item.name]
+        assert (prop.name, prop.description) == (info.label, info.description), item.name
+        if info.choices:
+            assert [i.identifier for i in prop.enum_items] == list(info.values)
+            assert prop.default == item.default
+        else:
+            assert abs(prop.default - item.default) < 1e-6, item.name
+        if info.low is not None:
+            assert abs(prop.hard_min - info.low) < 1e-6, item.name
+        if info.high is not None:
+            assert abs(prop.hard_max - min(info.high, 2 ** 31 - 1)) < 1e-6, item.name
+    assert scene.udf_reconstruction.udf_source == "network"
+    assert rna["hide_source"].default is True, "the panel's own property is kept"
+
+
+def test_a_new_setting_appears_in_the_generated_properties(scene, extension):
+    settings = extension.module("engine.settings")
+    properties = extension.module("ui.properties")
+
+    @dataclass
+    class WithNewSettings(settings.ReconstructSettings):
+        smoothing: float = settings.setting(0.5, "Smoothing", "How much the mesh is smoothed",
+                                            low=0.0, high=1.0, precision=2)
+        passes: int = settings.setting(3, "Passes", "Smoothing passes", low=1, high=10)
+        fill: str = settings.setting(
+            "holes", "Fill", "What to fill",
+            choices=(settings.Choice("holes", "Holes", "Small holes"),
+                     settings.Choice("nothing", "Nothing", "Leave every hole open")))
+        keep_colours: bool = settings.setting(True, "Keep Colours", "Carry the colours over")
+
+    group = properties.property_group(WithNewSettings, "UDFR_TestSettings", "A test group.")
+    bpy.utils.register_class(group)
+    bpy.types.Scene.udfr_test = bpy.props.PointerProperty(type=group)
+    try:
+        props = scene.udfr_test
+        rna = props.bl_rna.properties
+        assert (rna["smoothing"].name, rna["smoothing"].hard_max, rna["smoothing"].precision) \
+            == ("Smoothing", 1.0, 2)
+        assert (rna["passes"].hard_min, rna["passes"].hard_max) == (1, 10)
+        assert [i.identifier for i in rna["fill"].enum_items] == ["holes", "nothing"]
+        assert properties.to_settings(props, WithNewSettings) == WithNewSettings()
+        props.smoothing, props.passes, props.fill, props.keep_colours = 0.3, 5, "nothing", False
+        props.resolution = 96
+        assert properties.to_settings(props, WithNewSettings) == WithNewSettings(
+            smoothing=0.3, passes=5, fill="nothing", keep_colours=False, resolution=96)
+        props.passes = 50
+        assert props.passes == 10, "Blender clamps to the setting's range"
+    finally:
+        del bpy.types.Scene.udfr_test
+        bpy.utils.unregister_class(group)
+
+
+def _add_cloud(name: str, count: int = 2000):
+    """A vertex-only mesh object with points on a sphere, selected and active."""
+    directions = np.random.default_rng(0).normal(size=(count, 3))
+    points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(count)
+    mesh.attributes["position"].data.foreach_set("vector", points.astype(np.float32).ravel())
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj
+
+
+def test_the_operator_reads_every_panel_value_into_the_engine_settings(scene, extension):
+    settings = extension.module("engine.settings")
+    reconstruct = extension.module("operators.reconstruct")
+    props = scene.udf_reconstruction
+    props.radius, props.rho_min, props.outlier_ratio = 0.021, 0.55, 3.3
+    props.udf_source, props.radius_mode, props.seed = "nearest", "learned", 12
+    _add_cloud("Scan")
+    job = reconstruct.start_job(bpy.context)
+    try:
+        assert job.settings == settings.ReconstructSettings(
+            radius=0.021, rho_min=0.55, outlier_ratio=3.3, udf_source="nearest",
+            radius_mode="learned", seed=12), "single-precision floats arrive as typed"
+    finally:
+        reconstruct._job = None  # the job was never started
