@@ -1,8 +1,62 @@
-"""Tidy the one-layer mesh: degenerate faces, non-manifold vertices, small pieces."""
+"""Tidy the one-layer mesh: degenerate faces, non-manifold vertices, specks, small pieces."""
 
 import numpy as np
 
 from . import mesh_ops
+
+SPECK_AREA = 16.0  # voxels^2: a piece smaller than this (a 4 x 4 voxel patch) may be a speck
+CRUMB_AREA = 1.0  # voxels^2: a piece smaller than one voxel's face is below what the grid resolves
+ON_SHEET = 1.5  # voxels: a small piece this close to a larger one lies on it
+ON_SHEET_SHARE = 0.5  # ... with this share of its area
+SMALL_NEIGHBOURS = 32
+
+
+def find_specks(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
+    """The faces of specks: pieces left over from a noisy double cover, not parts of the surface.
+
+    A piece (faces joined by vertices) smaller than ``SPECK_AREA`` voxels^2 is a speck when it
+    is smaller than ``CRUMB_AREA`` (a crumb under one voxel's face, which no part the grid
+    resolves is) or when ``ON_SHEET_SHARE`` of its area lies within ``ON_SHEET`` voxels of a
+    larger piece (a fragment of a layer lying on a kept sheet). A small part on its own, a few
+    voxels across, stays.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64, world units; faces : (m, 3) int64.
+    spacing : float, the voxel size (world units).
+
+    Returns
+    -------
+    (m,) bool, True for the faces of specks.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(faces) == 0:
+        return np.zeros(0, bool)
+    count, label = mesh_ops.vertex_components(len(vertices), faces)
+    _, area = mesh_ops.face_normals(vertices / spacing, faces)
+    piece_area = np.bincount(label, weights=area, minlength=count)
+    small = piece_area[label] < SPECK_AREA
+    speck = small & (piece_area[label] < CRUMB_AREA)
+    rest = np.nonzero(small & ~speck)[0]
+    if len(rest):
+        cents = vertices[faces].mean(axis=1) / spacing
+        near = np.zeros(len(rest), bool)
+        if (~small).any():
+            dist, _ = cKDTree(cents[~small]).query(cents[rest], k=1,
+                                                  distance_upper_bound=ON_SHEET, workers=-1)
+            near = np.isfinite(dist)
+        # small pieces lying on a larger small piece
+        k = min(SMALL_NEIGHBOURS, len(rest))
+        dist, idx = cKDTree(cents[rest]).query(cents[rest], k=k, distance_upper_bound=ON_SHEET,
+                                              workers=-1)
+        found = np.isfinite(dist)
+        other = rest[np.where(found, idx, 0)]
+        larger = piece_area[label[other]] > piece_area[label[rest]][:, None]
+        near |= (found & larger).any(axis=1)
+        on_sheet = np.bincount(label[rest], weights=area[rest] * near, minlength=count)
+        speck[rest] |= (on_sheet >= ON_SHEET_SHARE * piece_area)[label[rest]]
+    return speck
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray, spacing: float,
@@ -13,17 +67,20 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, spacing: float,
     ----------
     vertices : (n, 3) float64, world units; faces : (m, 3) int64.
     spacing : float
-        Voxel size: faces with area below ``1e-8 spacing^2`` count as degenerate.
+        Voxel size: faces with area below ``1e-8 spacing^2`` count as degenerate; specks are
+        measured against it (:func:`find_specks`).
     min_component_faces : int
         Drop edge-connected pieces with fewer faces (0 keeps all).
 
     Returns
     -------
-    vertices (n', 3), faces (m', 3), counts (dict: degenerate, split_vertices, small_pieces).
+    vertices (n', 3), faces (m', 3), counts (dict: degenerate, split_vertices, specks,
+    small_pieces).
     """
-    counts = {"degenerate": 0, "split_vertices": 0, "small_pieces": 0}
+    counts = {"degenerate": 0, "split_vertices": 0, "specks": 0, "small_pieces": 0}
+    empty = np.zeros((0, 3)), np.zeros((0, 3), np.int64), counts
     if len(faces) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), counts
+        return empty
     repeated = ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
                 | (faces[:, 0] == faces[:, 2]))
     _, area = mesh_ops.face_normals(vertices, faces)
@@ -38,9 +95,16 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, spacing: float,
         counts["small_pieces"] = int(small.sum())
         faces = faces[~small[labels]]
     if len(faces) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), counts
+        return empty
     vertices, faces, _ = mesh_ops.remove_unreferenced(vertices, faces)
     before = len(vertices)
     vertices, faces = mesh_ops.split_nonmanifold_vertices(vertices, faces)
     counts["split_vertices"] = len(vertices) - before
+    speck = find_specks(vertices, faces, spacing)
+    if speck.any():
+        counts["specks"] = int(mesh_ops.vertex_components(len(vertices), faces[speck])[0])
+        faces = faces[~speck]
+        if len(faces) == 0:
+            return empty
+        vertices, faces, _ = mesh_ops.remove_unreferenced(vertices, faces)
     return vertices, faces, counts

@@ -68,5 +68,36 @@ def test_clean_mesh_degenerate_and_small_pieces():
     v, f, counts = clean_mesh(verts2, faces2, spacing=1.0, min_component_faces=2)
     assert counts["degenerate"] == 2 and counts["small_pieces"] == 1
     assert len(f) == len(faces) and len(v) == len(verts)
-    v, f, counts = clean_mesh(verts2, faces2, spacing=1.0, min_component_faces=0)
-    assert len(f) == len(faces) + 1
+    # at a finer voxel the lone triangle covers 2 voxels^2, far from the rest: a part, kept
+    v, f, counts = clean_mesh(verts2, faces2, spacing=0.5, min_component_faces=0)
+    assert len(f) == len(faces) + 1 and counts["specks"] == 0
+
+
+def test_specks_go_small_parts_stay():
+    """Pieces a few voxels across stay unless they lie on a larger piece (a fragment of the
+    other layer) or are crumbs under a voxel's face; nothing else is touched."""
+    pieces = []
+
+    def add(n, shift, flip=False):
+        v, f = grid_mesh(n)
+        pieces.append((v + shift, f[:, ::-1] if flip else f))
+
+    add(12, [0, 0, 0])  # the sheet: 121 voxels^2
+    add(3, [4, 4, 0.6], flip=True)  # 4 voxels^2 lying 0.6 voxel over it, facing the other way
+    add(3, [30, 0, 0])  # a small part on its own: 4 voxels^2
+    add(4, [0, 30, 0])  # two small pieces, one on the other: the larger (9) stays
+    add(2, [1, 31, 0.5])  # ... the smaller (1) goes
+    crumb = np.array([[30, 30, 0], [30.5, 30, 0], [30, 30.5, 0]])  # 0.125 voxels^2
+    pieces.append((crumb, np.array([[0, 1, 2]])))
+    verts, faces, start = [], [], 0
+    for v, f in pieces:
+        verts.append(v)
+        faces.append(f + start)
+        start += len(v)
+    verts, faces = np.concatenate(verts), np.concatenate(faces)
+    v, f, counts = clean_mesh(verts, faces, spacing=1.0)
+    assert counts["specks"] == 3
+    _, areas = mo.face_normals(v, f)
+    count, labels = mo.vertex_components(len(v), f)
+    assert sorted(np.round(np.bincount(labels, weights=areas), 6)) == [4, 9, 121]
+    assert not np.any((v[:, 2] != 0))  # what stays is the flat pieces, untouched
