@@ -216,6 +216,10 @@ def last_result():
 
 def _finish(operator, install: Install) -> set:
     _state["install"] = None
+    if install.ok:
+        # The panel and the operators wait for numpy in a Blender that had none (see the
+        # extension's __init__); registering happens here, on the main thread.
+        importlib.import_module(EXTENSION).register_main()
     _state["result"] = (install.ok, install.message)
     print("UDF Reconstruction: pip " + " ".join(install.requirements) + "\n  "
           + "\n  ".join(install.output[-40:]))

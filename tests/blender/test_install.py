@@ -3,6 +3,7 @@ local wheel folder standing in for PyPI: what it installs, where, that the packa
 once (no restart), that Blender's numpy is kept, and what a failure says."""
 
 import importlib
+import importlib.util
 import os
 import sys
 import zipfile
@@ -141,3 +142,28 @@ def test_the_preferences_offer_the_button_only_when_something_is_missing(
     shown = drawn()
     assert not [e for e in shown.log if e[1] == "udf_reconstruction.install_packages"]
     assert any(text.startswith("Installed udfr-probe in ") for text in shown.labels)
+
+
+def test_without_numpy_the_preferences_come_first_and_the_panel_after_the_install(
+        extension, probe_missing, monkeypatch):
+    root = importlib.import_module(extension.package)
+    find_spec = importlib.util.find_spec
+    make_wheel(probe_missing, PROBE, "1.0", "ANSWER = 3\n")
+    extension.disable()
+    try:
+        with monkeypatch.context() as patch:  # a Blender without numpy, as some distributions'
+            patch.setattr(root.importlib.util, "find_spec",
+                          lambda name, *args: None if name == "numpy" else find_spec(name, *args))
+            extension.enable()
+            assert hasattr(bpy.ops.udf_reconstruction, "install_packages")
+            assert bpy.ops.udf_reconstruction.install_packages.poll()
+            assert not hasattr(bpy.types.Scene, "udf_reconstruction")
+            assert not hasattr(bpy.types, "UDFR_PT_reconstruct")
+        # numpy "arrives" with the install: the panel registers at once, no restart
+        assert bpy.ops.udf_reconstruction.install_packages() == {'FINISHED'}
+        assert hasattr(bpy.types.Scene, "udf_reconstruction")
+        assert hasattr(bpy.types, "UDFR_PT_reconstruct")
+    finally:
+        extension.disable()
+        extension.enable()
+    assert hasattr(bpy.types.Scene, "udf_reconstruction")
