@@ -4,7 +4,7 @@ import bpy
 
 from ..operators import bridge, dependencies
 from ..operators.reconstruct import running_job
-from .properties import DEVICE_ITEMS, available_radius_modes, scene_settings
+from .properties import DEVICE_ITEMS, scene_settings
 
 
 def _length(context, fraction: float, extent: float) -> str:
@@ -75,11 +75,6 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
         body = layout.column()
         body.enabled = job is None
         body.prop(props, "radius_mode", expand=True)
-        available = available_radius_modes()
-        if props.radius_mode not in available:
-            box = body.box()
-            box.label(text=f"'{props.radius_mode}' is not available in this build", icon='ERROR')
-            box.label(text=f"Use: {', '.join(sorted(available))}")
 
         if props.radius_mode == 'fixed':
             body.prop(props, "radius")

@@ -11,7 +11,7 @@ from dataclasses import fields
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..engine.settings import DEVICE_CHOICES, RADIUS_MODES, ReconstructSettings, setting_info
+from ..engine.settings import DEVICE_CHOICES, ReconstructSettings, setting_info
 
 INT_LIMIT = 2 ** 31 - 1  # Blender's integer properties are 32-bit signed
 
@@ -84,15 +84,6 @@ UDFR_SceneSettings = property_group(
                     "eye icon in the Outliner shows it again)",
         default=True)},
     updates={"rho_min": _rho_min_changed, "rho_max": _rho_max_changed})
-
-
-def available_radius_modes() -> set:
-    """The radius modes the engine has built; all of them when the engine cannot be asked."""
-    try:
-        from ..engine import radius
-    except ImportError:
-        return set(RADIUS_MODES)
-    return set(radius.POLICIES)
 
 
 def scene_settings(scene):
