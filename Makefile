@@ -16,7 +16,12 @@ NEW_USER_SHOTS ?= $(CURDIR)/.cache/new-user
 NEW_USER_RESOLUTION ?= 64
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
 
-.PHONY: test-blender test-blender-gui test-bpy build build-lean clean-user check-new-user
+# check-zip: the zip to install into a throw-away configuration, and its own user folder.
+ZIP ?= dist/udf_reconstruction-$(VERSION)-linux_x64-python3.11.zip
+ZIP_USER_RESOURCES := $(CURDIR)/.cache/blender-zipcheck
+INSTALL_MISSING ?=
+
+.PHONY: test-blender test-blender-gui test-bpy build build-lean clean-user check-new-user check-zip
 
 test-blender: clean-user
 	BLENDER_USER_RESOURCES=$(USER_RESOURCES) $(BLENDER) -b --factory-startup \
@@ -46,3 +51,13 @@ check-new-user: build-lean
 	    --python-exit-code 1 --python tools/blender_new_user.py -- \
 	    dist/udf_reconstruction-$(VERSION).zip $(NEW_USER_CLOUD) $(NEW_USER_SHOTS) \
 	    $(NEW_USER_RESOLUTION)
+
+# Install ZIP into a fresh user configuration, enable it (with INSTALL_MISSING=1 pressing
+# Install Missing Packages when something is missing) and reconstruct a sphere
+# (tools/blender_zip_check.py).
+check-zip:
+	rm -rf $(ZIP_USER_RESOURCES)
+	BLENDER_USER_RESOURCES=$(ZIP_USER_RESOURCES) $(BLENDER) --factory-startup --command \
+	    extension install-file -r user_default $(ZIP)
+	BLENDER_USER_RESOURCES=$(ZIP_USER_RESOURCES) $(BLENDER) -b --python-exit-code 1 \
+	    --python tools/blender_zip_check.py -- $(if $(INSTALL_MISSING),--install-missing)

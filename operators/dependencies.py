@@ -20,6 +20,7 @@ DEPENDENCIES = (
     ("scipy", "scipy", "neighbour search", True),
     ("skimage", "scikit-image", "marching cubes", True),
     ("laspy", "laspy", "reading LAS/LAZ scans (optional)", False),
+    ("trimesh", "trimesh", "STL and glTF files in batch runs (optional)", False),
     ("torch", "torch", "computing on an NVIDIA GPU (optional)", False),
 )
 
