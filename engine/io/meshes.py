@@ -25,13 +25,13 @@ def read_stl(path: str) -> Mesh:
         data = file.read()
     if not data:
         raise BadFile("the file is empty")
-    if len(data) >= 84 and not data.lstrip().startswith(b"solid"):
-        count = int(np.frombuffer(data, "<u4", 1, 80)[0])
-        if 84 + count * _STL_TRIANGLE_BYTES != len(data):
+    count = int(np.frombuffer(data, "<u4", 1, 80)[0]) if len(data) >= 84 else 0
+    binary = len(data) >= 84 and 84 + count * _STL_TRIANGLE_BYTES == len(data)
+    if not binary and not data.lstrip().startswith(b"solid"):
+        if len(data) >= 84:
             raise BadFile(f"a binary STL of {count:,} triangles needs "
                           f"{84 + count * _STL_TRIANGLE_BYTES:,} bytes, but the file has "
                           f"{len(data):,}")
-    elif len(data) < 84 and not data.lstrip().startswith(b"solid"):
         raise BadFile("not an STL file (too short for binary STL, no 'solid' line)")
     loaded = _parsed(load_stl, io.BytesIO(data))
     corners = np.asarray(loaded["vertices"], np.float64)[np.asarray(loaded["faces"])]

@@ -477,6 +477,28 @@ def test_corrupt_numpy_and_las_files(tmp_path):
     _fail(tmp_path / "junk.las")
 
 
+def test_binary_stl_whose_header_starts_with_solid_reads_as_binary(tmp_path):
+    mesh = _closed_sphere()
+    write_mesh(tmp_path / "sphere.stl", mesh)
+    data = (tmp_path / "sphere.stl").read_bytes()
+    (tmp_path / "solid.stl").write_bytes(b"solid exported by a CAD program".ljust(80) + data[80:])
+    back = read_mesh(tmp_path / "solid.stl")
+    assert back.faces.shape == (1280, 3) and back.vertices.shape == (642, 3)
+
+
+def test_corrupt_glb_and_gltf_files(tmp_path):
+    (tmp_path / "junk.glb").write_bytes(b"glTF" + bytes(40))
+    _fail(tmp_path / "junk.glb", "not a readable file of this format")
+    (tmp_path / "junk.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives"')
+    _fail(tmp_path / "junk.gltf", "not a readable file of this format")
+    (tmp_path / "empty.gltf").write_text('{"asset": {"version": "2.0"}}')
+    _fail(tmp_path / "empty.gltf", "contains no meshes or points")
+    write_mesh(tmp_path / "cut.glb", _mesh(np.random.default_rng(8)))
+    data = (tmp_path / "cut.glb").read_bytes()
+    (tmp_path / "cut.glb").write_bytes(data[:len(data) // 2])
+    _fail(tmp_path / "cut.glb", "not a readable file of this format")
+
+
 def test_nan_coordinates_load_and_are_then_refused_by_the_frame(tmp_path):
     (tmp_path / "holes.xyz").write_text("".join(f"{i} {i * i % 7} {i % 3}\n" for i in range(20))
                                         + "nan 0 0\n1 inf 2\n")
