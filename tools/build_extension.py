@@ -113,9 +113,9 @@ def bundled_requirements(python_version: str, platform: str, path: Path = None) 
 
 
 def download_wheels(platform: str, python_version: str, folder: Path) -> list:
-    """Binary wheels of the bundled requirements and their dependencies for one platform and
-    Python version, downloaded into the empty ``folder``, without the packages that are not
-    bundled. (pip's own cache makes a repeated download quick.)"""
+    """Binary wheels of the bundled requirements and their dependencies (numpy among them) for
+    one platform and Python version, downloaded into the empty ``folder``. (pip's own cache makes
+    a repeated download quick.)"""
     command = [sys.executable, "-m", "pip", "download", "--quiet", "--dest", str(folder),
                "--only-binary=:all:", "--implementation", "cp",
                "--python-version", python_version]
@@ -124,7 +124,7 @@ def download_wheels(platform: str, python_version: str, folder: Path) -> list:
     numpy = f"numpy=={BLENDER_NUMPY[python_version][0]}"  # so dependencies fit Blender's numpy
     subprocess.run(command + bundled_requirements(python_version, platform) + [numpy],
                    check=True)
-    return sorted(p for p in folder.glob("*.whl") if wheel_name(p) not in NOT_BUNDLED)
+    return sorted(folder.glob("*.whl"))
 
 
 def numpy_conflicts(wheels, python_version: str) -> list:
@@ -195,7 +195,7 @@ def build(output: Path, platforms: list, python_version, blender) -> list:
                 folder = Path(tmp) / f"download-{platform}"
                 folder.mkdir()
                 for wheel in download_wheels(platform, python_version, folder):
-                    if wheel.name not in wheels:
+                    if wheel.name not in wheels and wheel_name(wheel) not in NOT_BUNDLED:
                         shutil.copy2(wheel, stage / "wheels" / wheel.name)
                         wheels.append(wheel.name)
             conflicts = numpy_conflicts([stage / "wheels" / w for w in wheels], python_version)

@@ -74,3 +74,89 @@ def test_built_zip_ships_only_the_extension_and_installs(extension, tmp_path):
         _extension_cli(["remove", f"user_default.{EXTENSION_ID}", "--no-prefs"])
         extension.enable()
     assert extension.package in bpy.context.preferences.addons
+
+
+# --- zips per platform and Python version (wheels faked: no network) ------------------------------
+
+def _fake_wheel(folder, filename: str, numpy_spec: str = "") -> Path:
+    name, version = filename.split("-")[:2]
+    path = folder / filename
+    with zipfile.ZipFile(path, "w") as archive:
+        requires = f"Requires-Dist: numpy{numpy_spec}\n" if numpy_spec else ""
+        archive.writestr(f"{name}-{version}.dist-info/METADATA",
+                         f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n{requires}")
+    return path
+
+
+_PLATFORM_TAG = {"linux-x64": "manylinux_2_17_x86_64", "windows-x64": "win_amd64"}
+
+
+def _fake_download(platform, python_version, folder, numpy_spec=">=1.23.5"):
+    """What pip would download: the scipy pin of requirements.txt for this Python as a binary
+    wheel of the platform, a pure-Python wheel, and numpy (which the build must drop)."""
+    tool = _load_build_tool()
+    (scipy,) = [r for r in tool.bundled_requirements(python_version, platform)
+                if r.startswith("scipy")]
+    abi = "cp" + python_version.replace(".", "")
+    tag = _PLATFORM_TAG[platform]
+    return [_fake_wheel(folder, f"scipy-{scipy.split('==')[1]}-{abi}-{abi}-{tag}.whl",
+                        numpy_spec),
+            _fake_wheel(folder, "threadpoolctl-3.5.0-py3-none-any.whl"),
+            _fake_wheel(folder, f"numpy-2.2.4-{abi}-{abi}-{tag}.whl")]
+
+
+def _manifest(zip_path) -> dict:
+    return tomllib.loads(zipfile.ZipFile(zip_path).read("blender_manifest.toml").decode())
+
+
+def test_one_command_builds_a_zip_per_platform_and_python_and_a_lean_one(tmp_path, monkeypatch):
+    tool = _load_build_tool()
+    monkeypatch.setattr(tool, "PLATFORM_TAGS", {p: tool.PLATFORM_TAGS[p] for p in _PLATFORM_TAG})
+    monkeypatch.setattr(tool, "download_wheels", _fake_download)
+    assert tool.main(["--output-dir", str(tmp_path)]) == 0
+
+    zips = sorted(p.name for p in tmp_path.glob("*.zip"))
+    assert zips == [f"{EXTENSION_ID}-0.1.0-{platform}-python{python}.zip"
+                    for platform in ("linux_x64", "windows_x64")
+                    for python in ("3.11", "3.13")] + [f"{EXTENSION_ID}-0.1.0.zip"]
+    for name in zips:
+        zip_path = tmp_path / name
+        assert _extension_cli(["validate", str(zip_path)]) == 0, name
+        manifest = _manifest(zip_path)
+        # No Blender version bounds: Blender refuses a zip for another Python by its wheels.
+        assert manifest["blender_version_min"] == "4.2.0" and "blender_version_max" not in manifest
+        wheels = [n for n in zipfile.ZipFile(zip_path).namelist() if n.startswith("wheels/")]
+        if name == f"{EXTENSION_ID}-0.1.0.zip":
+            assert not wheels and "wheels" not in manifest
+            continue
+        platform, python = name[:-4].split("-")[2:]
+        abi = "cp" + python.removeprefix("python").replace(".", "")
+        scipy = "1.13.1" if abi == "cp311" else "1.15.3"
+        tag = _PLATFORM_TAG[platform.replace("_", "-")]
+        assert sorted(wheels) == [f"wheels/scipy-{scipy}-{abi}-{abi}-{tag}.whl",
+                                  "wheels/threadpoolctl-3.5.0-py3-none-any.whl"], name
+        assert manifest["build"]["generated"]["platforms"] == [platform.replace("_", "-")]
+
+
+def test_wheels_that_refuse_blenders_numpy_stop_the_build(tmp_path, monkeypatch):
+    tool = _load_build_tool()
+    monkeypatch.setattr(tool, "download_wheels",
+                        lambda *args: _fake_download(*args, numpy_spec="<2"))
+    with pytest.raises(SystemExit, match=r"(?s)Blender's numpy.*scipy-1\.15\.3-cp313.*"
+                                         r"needs numpy<2, Blender with Python 3\.13 ships"):
+        tool.main(["--platform", "linux-x64", "--python-version", "3.13",
+                   "--output-dir", str(tmp_path)])
+    assert not list(tmp_path.glob("*.zip"))
+
+
+def test_requirements_are_chosen_per_python_and_platform():
+    tool = _load_build_tool()
+    for python in tool.PYTHON_VERSIONS:
+        for platform in tool.PLATFORM_TAGS:
+            requirements = tool.bundled_requirements(python, platform)
+            names = [tool._normal(r.split("[")[0].split("=")[0]) for r in requirements]
+            assert "numpy" not in names and "torch" not in names
+            assert {"scipy", "scikit-image", "laspy"} <= set(names)
+            assert all("==" in r and ";" not in r for r in requirements)
+    assert "scipy==1.13.1" in tool.bundled_requirements("3.11", "linux-x64")
+    assert "scipy==1.15.3" in tool.bundled_requirements("3.13", "linux-x64")
