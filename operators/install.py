@@ -36,8 +36,12 @@ PIP_NAMES = {"laspy": "laspy[lazrs]"}
 NOT_INSTALLED = {"torch"}
 
 
-def packages_folder(create: bool = False) -> str:
-    """The folder the button installs into: this extension's user folder, ``site-packages``."""
+def packages_folder(create: bool = False):
+    """The folder the button installs into: this extension's user folder, ``site-packages``.
+    None when the package is not loaded as an extension (the batch script imports a checkout
+    as a plain package), which has no such folder."""
+    if not EXTENSION.startswith("bl_ext."):
+        return None
     return bpy.utils.extension_path_user(EXTENSION, path="site-packages", create=create)
 
 
@@ -45,14 +49,14 @@ def add_to_path() -> None:
     """Make the packages installed by the button importable (at enable time, and after an
     install). Appended, so Blender's own packages (numpy) always come first."""
     folder = packages_folder()
-    if os.path.isdir(folder) and folder not in sys.path:
+    if folder and os.path.isdir(folder) and folder not in sys.path:
         sys.path.append(folder)
-    importlib.invalidate_caches()
+        importlib.invalidate_caches()
 
 
 def remove_from_path() -> None:
     folder = packages_folder()
-    while folder in sys.path:
+    while folder and folder in sys.path:
         sys.path.remove(folder)
 
 
@@ -247,6 +251,10 @@ class UDFR_OT_install_packages(bpy.types.Operator):
             return False
         if not to_install():
             cls.poll_message_set("Nothing is missing")
+            return False
+        if packages_folder() is None:
+            cls.poll_message_set("Install the extension from a zip (Install from Disk) to use "
+                                 "this button")
             return False
         return True
 

@@ -39,7 +39,9 @@ def _draw_install(layout) -> None:
         box.label(text="Install them here (downloads them with pip), or install the extension "
                        f"zip made for your platform and Python {python}.")
         box.operator("udf_reconstruction.install_packages", icon='IMPORT')
-        box.label(text=f"Installs into {install.packages_folder()}", icon='FILE_FOLDER')
+        folder = install.packages_folder()
+        if folder:
+            box.label(text=f"Installs into {folder}", icon='FILE_FOLDER')
 
 
 def _lines(message: str) -> list:

@@ -33,6 +33,16 @@ def add_cloud(name: str, points, colors=None):
     return obj
 
 
+def scene_state():
+    """What a failed run must not change: the objects with their data, visibility and selection,
+    the active object, and the mesh data-blocks."""
+    layer = bpy.context.view_layer
+    objects = sorted((o.name, o.data.name if o.data else None, o.hide_get(), o.select_get(),
+                      tuple(c.name for c in o.users_collection)) for o in layer.objects)
+    active = layer.objects.active.name if layer.objects.active else None
+    return objects, active, sorted(m.name for m in bpy.data.meshes)
+
+
 class Reports:
     """Stands in for an operator's ``report`` when a job is finished by hand."""
 

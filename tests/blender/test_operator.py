@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mathutils import Matrix
 
-from tests.blender.helpers import Reports, add_cloud, sphere_points
+from tests.blender.helpers import Reports, add_cloud, scene_state, sphere_points
 
 
 RADIUS = 0.8          # of the generated sphere, local units
@@ -140,7 +140,7 @@ def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
     engine_errors = extension.module("engine.errors")
     add_cloud("Sphere", sphere_points(20_000, 1.0))
     scene.udf_reconstruction.resolution = 128
-    before = set(bpy.data.objects)
+    before = scene_state()
 
     job = reconstruct.start_job(bpy.context)  # exactly what invoke() does
     job.start_thread()
@@ -162,7 +162,7 @@ def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
     reports = Reports()
     assert reconstruct.finish_job(reports, bpy.context, job) == {'CANCELLED'}
     assert reports.messages == [({'INFO'}, "Reconstruction cancelled; nothing was changed.")]
-    assert set(bpy.data.objects) == before
+    assert scene_state() == before
     assert reconstruct.running_job() is None
 
 
