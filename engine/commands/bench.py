@@ -18,9 +18,11 @@ Examples::
 
 import sys
 
+from ..settings import DEVICES, RADIUS_MODES
+
 CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
 DOMAIN_NAMES = ("cars", "garments", "rooms")
-TABLE_MODES = ("fixed", "curvature", "learned")
+TABLE_MODES = RADIUS_MODES
 REFERENCE_LABEL = "{method} (reference)"
 
 
@@ -29,8 +31,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--method", default="ours",
                         help="poisson, ours, nearest-udf, or ground-truth (the GT itself: the "
                              "metrics' sampling floor) (default ours)")
-    parser.add_argument("--radius-mode", default="fixed",
-                        help="radius mode of ours: fixed, curvature or learned (default fixed)")
+    parser.add_argument("--radius-mode", default="fixed", choices=RADIUS_MODES,
+                        help="radius mode of ours (default fixed)")
     parser.add_argument("--radius", type=float, default=None,
                         help="ball radius of ours in fixed mode, unit frame (default: the "
                              "engine's, 0.018); results are then named ours-r<radius>")
@@ -45,7 +47,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="metric sampling seed (default 0)")
     parser.add_argument("--resolution", type=int, default=256,
                         help="grid resolution of ours (default 256)")
-    parser.add_argument("--device", default="auto", help="device of ours: auto, cpu or cuda")
+    parser.add_argument("--device", default="auto", choices=DEVICES,
+                        help="device of ours (default auto)")
     parser.add_argument("--out", default="bench_results",
                         help="folder for the JSON results (default bench_results)")
     parser.add_argument("--table", action="store_true",
