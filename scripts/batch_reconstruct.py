@@ -34,7 +34,9 @@ import argparse
 import importlib
 import importlib.util
 import re
+import signal
 import sys
+import threading
 import time
 import types
 from pathlib import Path
@@ -247,13 +249,16 @@ def main() -> int:
     print(f"settings: {settings.to_dict()}", flush=True)
 
     reconstruct = importlib.import_module(package + ".engine.reconstruct").reconstruct
+    stop = stop_on_interrupt()
     failed = []
     try:
         for index, (path, mesh_path) in enumerate(zip(files, meshes), 1):
             prefix = f"[{index}/{len(files)}] {path.name}:"
+            if stop.is_set():
+                raise KeyboardInterrupt
             try:
                 result = reconstruct_one(path, mesh_path, settings, prefix, engine_io,
-                                         reconstruct, preflight)
+                                         reconstruct, preflight, stop.is_set)
             except (errors.InputError, OSError) as error:
                 reason = str(error)
             except errors.Cancelled:
@@ -282,15 +287,36 @@ def main() -> int:
     return 1 if failed else 0
 
 
-def reconstruct_one(path, mesh_path, settings, prefix, engine_io, reconstruct, preflight):
-    """Read one input, reconstruct it, write its mesh (atomically); return the result."""
+def stop_on_interrupt() -> threading.Event:
+    """An event that Ctrl+C (SIGINT) or SIGTERM sets; the engine stops at its next cancel check.
+    A second signal ends the run at once. (Inside Blender this replaces Blender's own SIGINT
+    handler, which would only flag the signal for a render and leave the script running.)"""
+    stop = threading.Event()
+
+    def interrupt(signum, frame):
+        stop.set()
+        signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT
+                      else signal.SIG_DFL)
+
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
+    return stop
+
+
+def reconstruct_one(path, mesh_path, settings, prefix, engine_io, reconstruct, preflight,
+                    cancel):
+    """Read one input, reconstruct it, write its mesh (atomically); return the result.
+    ``cancel()`` true stops it (Cancelled, or KeyboardInterrupt once reconstructed) before
+    anything is written."""
     cloud = engine_io.read_point_cloud(path)
     print(f"{prefix} {len(cloud):,} points", flush=True)
     started = time.perf_counter()
-    result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix))
+    result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix), cancel=cancel)
     for message in result.messages:
         print(f"{prefix} note: {message}", flush=True)
     preflight.check_result(result.mesh)
+    if cancel():
+        raise KeyboardInterrupt
     engine_io.write_mesh(mesh_path, result.mesh)
     print(f"{prefix} wrote {mesh_path} ({len(result.mesh.faces):,} faces, "
           f"{time.perf_counter() - started:.1f} s)", flush=True)
