@@ -18,7 +18,8 @@ from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_prog
 from ..settings import DEVICES
 from .cleanup import clean_mesh
 from .grid_field import UDFGrid
-from .layers import choose_layer, close_pinholes, drop_flaps, extend_rims, peel_lips
+from .layers import (choose_layer, close_pinholes, drop_facing_pairs, drop_flaps,
+                     extend_rims, peel_lips)
 from .marching import double_cover
 from .optimize import ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START, optimize_cover
 
@@ -162,11 +163,13 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
         keep, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
         kept, lips = peel_lips(verts, faces[keep])
         kept, flaps = drop_flaps(kept)
+        kept, facing = drop_facing_pairs(verts, kept, field, h)
         kept, closed = close_pinholes(kept)
         verts, seams = extend_rims(verts, kept, field, h)
         stats.update({"twinned_faces": layer.twins, "layer_trees": layer.trees,
                       "double_pairs": layer.double_pairs, "seam_vertices": len(seams),
                       "lip_faces_dropped": lips, "flaps_dropped": flaps,
+                      "facing_faces_dropped": facing,
                       "pinholes_closed": closed})
     else:
         kept = faces

@@ -23,6 +23,11 @@ kept sheet, less than a voxel from it. Seams are left as they are (welding them 
 sheet turned faces over and measured as more double area than it closed). Rims, the boundaries
 beyond which the field rises, are moved out to where the field puts the surface's rim.
 
+Kept faces that still face each other within a voxel, turned less than twins (both layers
+stalled a little off the surface and tilted, faces turned at a junction, two sheets crossing),
+lose one face of each pair where the field shows one sheet between them
+(:func:`drop_facing_pairs`).
+
 Twins are matched geometrically (the two layers' triangulations differ): an opposite-facing face
 (normals more than about 150 degrees apart: a crease face at a junction is no twin) whose centroid lies within ``TWIN_LATERAL`` voxels of the
 face's normal line, on top of it or behind it (up to twice the iso-value: layers that did not
@@ -270,6 +275,53 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     keep[_broad(~twinned, pairs, m)] = True  # the only cover of its part (a thin part's side)
     double = keep[twin_f] & keep[twin_g]
     return keep, LayerReport(int(twinned.sum()), int(count), int(double.sum()))
+
+
+FACING_COS = -0.5  # kept faces this far turned against each other read as a double layer
+FACING_DISTANCE = 1.0  # voxels between their centroids
+
+
+def drop_facing_pairs(vertices: np.ndarray, faces: np.ndarray, field, spacing: float):
+    """Drop the stray face of every pair of kept faces that face each other on one sheet.
+
+    Twins (normals about 150 degrees apart) are settled by the labelling. What it leaves are
+    pairs turned less than that against each other, within ``FACING_DISTANCE`` voxels: both
+    layers stalled a little off the surface and tilted, or the faces turned at a junction or
+    where two sheets cross. When the field has no bump between the two (they lie on one sheet),
+    the face with fewer kept neighbours goes (the field's larger value breaks ties: it stands
+    off the surface). Two sheets of a thin part, with the field rising between them, stay.
+
+    Returns (faces, faces dropped).
+    """
+    from scipy.spatial import cKDTree
+
+    if len(faces) < 2:
+        return faces, 0
+    x = vertices / spacing
+    normals, _ = mesh_ops.face_normals(x, faces)
+    cents = x[faces].mean(axis=1)
+    k = min(16, len(faces))
+    dist, idx = cKDTree(cents).query(cents, k=k, distance_upper_bound=FACING_DISTANCE,
+                                     workers=-1)
+    rows, cols = np.nonzero(np.isfinite(dist))
+    f, g = rows, idx[rows, cols]
+    facing = (f < g) & (np.einsum("ij,ij->i", normals[f], normals[g]) < FACING_COS)
+    f, g = f[facing], g[facing]
+    if len(f) == 0:
+        return faces, 0
+    if field is not None:
+        one = _one_sheet_between(field, spacing, cents[f], cents[g])
+        f, g = f[one], g[one]
+        if len(f) == 0:
+            return faces, 0
+    pairs, _ = mesh_ops.dual_edges(faces)
+    attached = np.bincount(pairs.reshape(-1), minlength=len(faces)).astype(np.float64)
+    if field is not None:
+        u, _ = field.closest(cents * spacing)
+        attached -= np.minimum(u / spacing, 0.5)  # ties: the face off the surface is the stray
+    drop = np.zeros(len(faces), bool)
+    drop[np.where(attached[f] < attached[g], f, g)] = True
+    return faces[~drop], int(drop.sum())
 
 
 RIM_PROBE = 2.0  # voxels beyond a rim vertex where the field is asked for the rim

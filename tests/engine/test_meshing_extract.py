@@ -163,19 +163,20 @@ def test_small_disk_is_kept():
     assert double_share(mesh) < 0.01
 
 
-@pytest.mark.parametrize("name,limit", [("t_junction", 0.02), ("shelf", 0.03), ("boxes", 0.05),
-                                        ("mobius", 0.05)])
-def test_non_manifold_and_non_orientable_come_out_single_layered(name, limit):
+@pytest.mark.parametrize("name,limit,least", [("t_junction", 0.01, 0.93), ("shelf", 0.01, 0.93),
+                                              ("boxes", 0.03, 0.92), ("mobius", 0.01, 0.93)])
+def test_non_manifold_and_non_orientable_come_out_single_layered(name, limit, least):
     """A T-junction, a shelf touching a wall, two boxes sharing a face, a Möbius strip: the
     min-cut of DCUDF keeps both layers of these; here one layer remains, the surface's area
-    once. Within a voxel of a junction the welded faces turn, and a Möbius strip cannot be
-    wound consistently (along its seam the faces on either side face opposite ways): both read
-    as a little double area at this coarse grid (19 voxels per box side), hence the limits; a
-    kept double layer would read as about half of the area.)"""
+    once. Within a voxel of a junction the welded faces turn and face each other; one of each
+    such pair is dropped, which leaves a slot under a voxel wide along the junction (the boxes'
+    area limit). A Möbius strip cannot be wound consistently: along its seam the faces on
+    either side face opposite ways and read as a little double area. A kept double layer would
+    read as about half of the area."""
     shape, result = run(name)
     mesh = result.mesh
     assert double_share(mesh) < limit
-    assert 0.93 < area(mesh) / TRUE_AREA[name] < 1.03
+    assert least < area(mesh) / TRUE_AREA[name] < 1.03
     d = shape(mesh.vertices)[0] / H
     assert np.median(d) < 0.1 and np.mean(d) < 0.15
     # the whole surface is covered: every point of the truth is near the mesh
@@ -245,3 +246,48 @@ def test_no_cut_keeps_double_layer():
     result = extract_surface(grid, MeshingSettings(cut=False, iterations=100))
     assert summary(result.mesh)["loops"] == 0  # the closed pancake
     assert double_share(result.mesh) > 0.9
+
+
+def sheet(n, spacing, z, up=True):
+    """A flat n x n vertex grid at height z, normals up (or down), world units."""
+    xs, ys = np.meshgrid(np.arange(n) * spacing, np.arange(n) * spacing, indexing="ij")
+    verts = np.stack([xs.ravel(), ys.ravel(), np.full(n * n, z)], axis=1)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a, b, c, d = (i * n + j).ravel(), ((i + 1) * n + j).ravel(), ((i + 1) * n + j + 1).ravel(), \
+        (i * n + j + 1).ravel()
+    faces = np.concatenate([np.c_[a, b, c], np.c_[a, c, d]])
+    return verts, faces if up else faces[:, ::-1]
+
+
+def test_faces_turned_against_a_sheet_are_dropped_a_thin_part_stays():
+    """A strip of a stalled layer half a voxel over a sheet, tilted so it is no twin (normals
+    135 degrees apart), reads as double; it goes and the sheet stays whole. The two sides of a
+    thin part 0.9 voxel apart (the field rises between them) both stay."""
+    from engine.meshing.layers import drop_facing_pairs
+
+    h = 0.01
+    verts, faces = sheet(21, h, 0.0)
+    patch, patch_faces = sheet(3, 0.4 * h, 0.0, up=False)
+    patch[:, 2] = 0.5 * h - (patch[:, 0] - 0.4 * h)  # 45 degrees: from 0.1 to 0.9 voxel up
+    patch[:, :2] += 8 * h
+    both_v = np.concatenate([verts, patch])
+    both_f = np.concatenate([faces, patch_faces + len(verts)])
+    normals, _ = mo.face_normals(both_v, both_f)
+    assert np.allclose(normals[len(faces):, 2], -np.sqrt(0.5))
+    grid = A.sample_grid(A.rectangle((0.1, 0.1, 0.0), half_u=0.2, half_v=0.2),
+                         [-0.2, -0.2, -0.1], [0.4, 0.4, 0.1], 61, exact=True)
+    assert double_layer_share(both_v, both_f, h) > 0.005  # the strip and the sheet under it
+    kept, dropped = drop_facing_pairs(both_v, both_f, grid, h)
+    assert dropped == len(patch_faces) and np.array_equal(kept, faces)
+    assert double_layer_share(both_v, kept, h) == 0.0
+
+    low, low_f = sheet(21, h, -0.45 * h, up=False)
+    high, high_f = sheet(21, h, 0.45 * h)
+    thin_v = np.concatenate([low, high])
+    thin_f = np.concatenate([low_f, high_f + len(low)])
+    two = A.union(A.rectangle((0.1, 0.1, -0.45 * h), half_u=0.2, half_v=0.2),
+                  A.rectangle((0.1, 0.1, 0.45 * h), half_u=0.2, half_v=0.2))
+    grid = A.sample_grid(two, [-0.2, -0.2, -0.1], [0.4, 0.4, 0.1], 61, exact=True)
+    assert double_layer_share(thin_v, thin_f, h) > 0.5
+    kept, dropped = drop_facing_pairs(thin_v, thin_f, grid, h)
+    assert dropped == 0
