@@ -80,6 +80,11 @@ def python_binary() -> str:
     return sys.executable
 
 
+def _name(requirement: str) -> str:
+    """The package name of a requirement: ``laspy[lazrs]==2.5.4`` -> ``laspy``."""
+    return re.split(r"[<>=!~\[ ;]", requirement.strip())[0]
+
+
 def _remove_numpy(folder: str) -> None:
     """Remove the numpy that pip installed beside the packages: Blender's is the one to use."""
     for name in os.listdir(folder):
@@ -106,6 +111,8 @@ class Install:
         self.thread = None
         self._collected = 0
         self._downloaded = 0
+        self._requested = {_name(r) for r in self.requirements}
+        self._seen = set()  # the requested packages pip has looked up so far
         # Blender's numpy, which the packages must fit (None: this Blender has none).
         try:
             import numpy
@@ -127,7 +134,10 @@ class Install:
         found = re.match(r"Collecting (\S+)", line)
         if found:
             self._collected += 1
-            self.text = "Looking up " + re.split(r"[<>=!~\[ ]", found.group(1))[0]
+            name = _name(found.group(1))
+            if name in self._requested and "(from " not in line:
+                self._seen.add(name)
+            self.text = "Looking up " + name
         found = re.match(r"(?:Downloading|Using cached) (\S+?)-\d\S*\.whl(?: \((.+)\))?", line)
         if found:
             self._downloaded += 1
@@ -136,8 +146,11 @@ class Install:
         if line.startswith("Installing collected packages"):
             self.text = "Installing"
             self.fraction = max(self.fraction, 0.9)
-        elif self._collected:
-            self.fraction = max(self.fraction, 0.85 * self._downloaded / self._collected)
+        else:
+            # Downloads so far against those known to come: the files pip looked up and the
+            # requested packages it has not reached yet (their dependencies are not known yet).
+            coming = self._collected + len(self._requested - self._seen)
+            self.fraction = max(self.fraction, 0.85 * self._downloaded / max(coming, 1))
 
     def run(self) -> None:
         os.makedirs(self.folder, exist_ok=True)
@@ -165,8 +178,7 @@ class Install:
                 _remove_numpy(self.folder)
             add_to_path()
             missing = dependencies.missing_packages(optional=True)
-            still = [name for name in self.requirements
-                     if re.split(r"[\[<>=]", name)[0] in missing]
+            still = [name for name in self.requirements if _name(name) in missing]
             if still:
                 self.ok, self.message = False, (
                     f"pip finished but {', '.join(still)} still cannot be found. Restart "

@@ -113,16 +113,19 @@ def test_a_failed_install_says_why_and_what_to_do(extension, probe_missing):
 
 def test_progress_follows_pips_output(extension):
     install = extension.module("operators.install")
-    job = install.Install(["scipy"], "/nowhere", python=sys.executable)
+    job = install.Install(["scipy", "laspy[lazrs]"], "/nowhere", python=sys.executable)
     seen = []
     for line in ["Collecting scipy", "  Downloading scipy-1.15.3-cp313-cp313-manylinux_2_17_"
                  "x86_64.whl (37.3 MB)", "Collecting numpy<2.5,>=1.23.5 (from scipy)",
                  "  Using cached numpy-2.2.4-cp313-cp313-manylinux_2_17_x86_64.whl",
-                 "Installing collected packages: numpy, scipy"]:
+                 "Collecting laspy[lazrs]", "  Downloading laspy-2.5.4-py3-none-any.whl (84 kB)",
+                 "Installing collected packages: numpy, scipy, laspy"]:
         job._follow(line)
         seen.append((job.text, round(job.fraction, 3)))
-    assert seen == [("Looking up scipy", 0.0), ("Downloading scipy (37.3 MB)", 0.85),
-                    ("Looking up numpy", 0.85), ("Downloading numpy", 0.85),
+    # 1 of 2 known downloads, 1 of 3 (numpy found), 2 of 3, 2 of 3 (laspy looked up), 3 of 3
+    assert seen == [("Looking up scipy", 0.0), ("Downloading scipy (37.3 MB)", 0.425),
+                    ("Looking up numpy", 0.425), ("Downloading numpy", 0.567),
+                    ("Looking up laspy", 0.567), ("Downloading laspy (84 kB)", 0.85),
                     ("Installing", 0.9)]
 
 
