@@ -303,10 +303,11 @@ def drop_facing_pairs(vertices: np.ndarray, faces: np.ndarray, field, spacing: f
     k = min(16, len(faces))
     dist, idx = cKDTree(cents).query(cents, k=k, distance_upper_bound=FACING_DISTANCE,
                                      workers=-1)
-    rows, cols = np.nonzero(np.isfinite(dist))
-    f, g = rows, idx[rows, cols]
-    facing = (f < g) & (np.einsum("ij,ij->i", normals[f], normals[g]) < FACING_COS)
-    f, g = f[facing], g[facing]
+    found = np.isfinite(dist)
+    idx = np.where(found, idx, 0)
+    cos = np.einsum("ikc,ic->ik", normals[idx], normals)
+    f, col = np.nonzero(found & (cos < FACING_COS) & (idx > np.arange(len(faces))[:, None]))
+    g = idx[f, col]
     if len(f) == 0:
         return faces, 0
     if field is not None:
@@ -317,8 +318,9 @@ def drop_facing_pairs(vertices: np.ndarray, faces: np.ndarray, field, spacing: f
     pairs, _ = mesh_ops.dual_edges(faces)
     attached = np.bincount(pairs.reshape(-1), minlength=len(faces)).astype(np.float64)
     if field is not None:
-        u, _ = field.closest(cents * spacing)
-        attached -= np.minimum(u / spacing, 0.5)  # ties: the face off the surface is the stray
+        involved = np.unique(np.r_[f, g])
+        u, _ = field.closest(cents[involved] * spacing)
+        attached[involved] -= np.minimum(u / spacing, 0.5)  # ties: the face off the surface goes
     drop = np.zeros(len(faces), bool)
     drop[np.where(attached[f] < attached[g], f, g)] = True
     return faces[~drop], int(drop.sum())
