@@ -243,10 +243,12 @@ def _finish(operator, install: Install) -> set:
     return {'FINISHED'} if install.ok else {'CANCELLED'}
 
 
-def _redraw_preferences(context) -> None:
+def _redraw(context, kinds=None) -> None:
+    """Redraw the areas of ``kinds`` (all when None): the panel's red lines go once the
+    packages are there."""
     for window in context.window_manager.windows:
         for area in window.screen.areas:
-            if area.type == 'PREFERENCES':
+            if kinds is None or area.type in kinds:
                 area.tag_redraw()
 
 
@@ -301,11 +303,11 @@ class UDFR_OT_install_packages(bpy.types.Operator):
             context.workspace.status_text_set(
                 f"Installing packages: {install.text}, "
                 f"{time.perf_counter() - install.started:.0f} s - Esc to cancel")
-            _redraw_preferences(context)
+            _redraw(context, {'PREFERENCES'})
             return {'PASS_THROUGH'}
         context.window_manager.event_timer_remove(self._timer)
         context.workspace.status_text_set(None)
-        _redraw_preferences(context)
+        _redraw(context)
         return _finish(self, install)
 
     def cancel(self, context):
