@@ -42,6 +42,7 @@ def test_a_new_setting_appears_in_the_generated_properties(scene, extension):
             choices=(settings.Choice("holes", "Holes", "Small holes"),
                      settings.Choice("nothing", "Nothing", "Leave every hole open")))
         keep_colours: bool = settings.setting(True, "Keep Colours", "Carry the colours over")
+        rounds: int = 2  # declared without setting(): still a property, named after the field
 
     group = properties.property_group(WithNewSettings, "UDFR_TestSettings", "A test group.")
     bpy.utils.register_class(group)
@@ -53,11 +54,13 @@ def test_a_new_setting_appears_in_the_generated_properties(scene, extension):
             == ("Smoothing", 1.0, 2)
         assert (rna["passes"].hard_min, rna["passes"].hard_max) == (1, 10)
         assert [i.identifier for i in rna["fill"].enum_items] == ["holes", "nothing"]
+        assert (rna["rounds"].name, rna["rounds"].default) == ("Rounds", 2)
         assert properties.to_settings(props, WithNewSettings) == WithNewSettings()
         props.smoothing, props.passes, props.fill, props.keep_colours = 0.3, 5, "nothing", False
-        props.resolution = 96
+        props.resolution, props.rounds = 96, 3
         assert properties.to_settings(props, WithNewSettings) == WithNewSettings(
-            smoothing=0.3, passes=5, fill="nothing", keep_colours=False, resolution=96)
+            smoothing=0.3, passes=5, fill="nothing", keep_colours=False, rounds=3,
+            resolution=96)
         props.passes = 50
         assert props.passes == 10, "Blender clamps to the setting's range"
     finally:

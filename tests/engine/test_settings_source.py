@@ -34,6 +34,7 @@ class WithNewSettings(ReconstructSettings):
     fill: str = setting("holes", "Fill", "What to fill",
                         choices=(Choice("holes", "Holes", "Small holes"),
                                  Choice("nothing", "Nothing", "Leave every hole open")))
+    passes: int = 4  # declared without setting(): still a flag, named after the field
 
 
 def parser_for(settings_type):
@@ -44,9 +45,10 @@ def parser_for(settings_type):
 
 def test_a_new_setting_becomes_a_flag_that_parses_into_the_settings():
     args = parser_for(WithNewSettings).parse_args(
-        ["--smoothing", "0.25", "--no-keep-colours", "--fill", "nothing", "--resolution", "64"])
+        ["--smoothing", "0.25", "--no-keep-colours", "--fill", "nothing", "--passes", "7",
+         "--resolution", "64"])
     assert WithNewSettings.from_attributes(args) == WithNewSettings(
-        smoothing=0.25, keep_colours=False, fill="nothing", resolution=64)
+        smoothing=0.25, keep_colours=False, fill="nothing", passes=7, resolution=64)
     assert WithNewSettings.from_attributes(parser_for(WithNewSettings).parse_args([])) == \
         WithNewSettings(), "no flags: the dataclass defaults"
 
