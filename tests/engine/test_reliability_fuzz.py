@@ -1,6 +1,6 @@
 """A seeded fuzz of the readers over a few hundred mutated files.
 
-Small valid PLY (binary and ASCII), OBJ, OFF, STL, GLB, XYZ, NPY, NPZ, LAS and LAZ files are truncated,
+Small valid PLY (binary and ASCII), OBJ, OFF, STL, GLB, glTF, XYZ, NPY, NPZ, LAS and LAZ files are truncated,
 have random bytes inserted or overwritten, or get absurd counts in their headers. Every mutated
 file must give a point cloud or one InputError message naming the file: never another
 exception, an abort (lazrs once aborted the process on a 32-byte insertion) or a hang. The
@@ -37,7 +37,8 @@ def _seeds(folder: Path) -> list:
                        ("mesh.obj", Mesh(points, faces, normals)),
                        ("mesh.off", Mesh(points, faces, None, colors)),
                        ("mesh.stl", Mesh(points, faces)),
-                       ("mesh.glb", Mesh(points, faces, normals, colors))):
+                       ("mesh.glb", Mesh(points, faces, normals, colors)),
+                       ("mesh.gltf", Mesh(points, faces, normals, colors))):
         write_mesh(folder / name, mesh)
         paths.append(folder / name)
     ascii_ply = ["ply", "format ascii 1.0", "element vertex 300", "property float x",
