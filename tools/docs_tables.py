@@ -5,7 +5,7 @@
 
 A generated table sits between two comments that say which commands print it:
 
-    <!-- generated from: python -m engine bench --table --report --condition clean --count 30 --out bench_results/table1_clean -->
+    <!-- generated from: python -m engine bench --method ground-truth --report --out R -->
     ...
     <!-- end of generated table -->
 

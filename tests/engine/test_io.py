@@ -398,7 +398,8 @@ def test_missing_file_folder_and_unsupported_format(tmp_path):
     _fail(tmp_path / "folder.ply", "is a folder")
     (tmp_path / "scan.e57").write_bytes(b"ASTM-E57")
     _fail(tmp_path / "scan.e57",
-          "unsupported format; use PLY, OBJ, OFF, STL, GLB, GLTF, XYZ, PTS, TXT, NPY, NPZ, LAS or LAZ")
+          "unsupported format; use PLY, OBJ, OFF, STL, GLB, GLTF, XYZ, PTS, TXT, NPY, NPZ, "
+          "LAS or LAZ")
 
 
 @pytest.mark.parametrize("name", ["e.ply", "e.obj", "e.off", "e.xyz", "e.pts", "e.txt"])

@@ -1,10 +1,11 @@
 """A seeded fuzz of the readers over a few hundred mutated files.
 
 Small valid PLY (binary and ASCII), OBJ, OFF, STL, GLB, glTF, XYZ, NPY, NPZ, LAS and LAZ files
-are truncated, have random bytes inserted or overwritten, or get absurd counts in their headers. Every mutated
-file must give a point cloud or one InputError message naming the file: never another
-exception, an abort (lazrs once aborted the process on a 32-byte insertion) or a hang. The
-files are read in one child process, so an abort fails the test instead of killing pytest.
+are truncated, have random bytes inserted or overwritten, or get absurd counts in their
+headers. Every mutated file must give a point cloud or one InputError message naming the file:
+never another exception, an abort (lazrs once aborted the process on a 32-byte insertion) or a
+hang. The files are read in one child process, so an abort fails the test instead of killing
+pytest.
 """
 
 import json
