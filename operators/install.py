@@ -95,11 +95,10 @@ def _remove_numpy(folder: str) -> None:
 class Install:
     """One pip run on a worker thread; ``text`` and ``fraction`` follow pip's output."""
 
-    def __init__(self, requirements, folder, python=None, extra_args=()):
+    def __init__(self, requirements, folder, python=None):
         self.requirements = list(requirements)
         self.folder = folder
         self.python = python or python_binary()
-        self.extra_args = list(extra_args)
         self.text = "Starting pip"
         self.fraction = 0.0
         self.output = []
@@ -123,7 +122,7 @@ class Install:
     def command(self, constraints: str) -> list:
         return [self.python, "-m", "pip", "install", "--target", self.folder, "--upgrade",
                 "--only-binary=:all:", "--progress-bar", "off", "--disable-pip-version-check",
-                "--no-input", "--constraint", constraints, *self.extra_args, *self.requirements]
+                "--no-input", "--constraint", constraints, *self.requirements]
 
     def _follow(self, line: str) -> None:
         """Turn one line of pip's output into ``text`` and ``fraction``."""
