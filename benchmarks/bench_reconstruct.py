@@ -1,18 +1,22 @@
-"""Time and memory of one reconstruction per grid resolution, on the bundled 50 000-point cloud.
+"""Time and memory of one reconstruction per grid resolution, on the bundled 50 000-point cloud,
+beside Open3D's screened Poisson on the same cloud in the same run.
 
 Usage (from the repository root)::
 
     python benchmarks/bench_reconstruct.py [--resolutions 128 256] [--device cpu]
                                            [--udf-source network] [--input examples/owl_50k.ply]
-                                           [--radius-mode fixed|curvature|learned]
+                                           [--radius-mode fixed|curvature|learned] [--no-poisson]
 
-Each resolution runs in a fresh child process so its peak resident memory (``ru_maxrss``) is
-its own. Prints one table row per resolution: wall seconds per stage (frame, band, udf,
-meshing, finish, total), the child's CPU seconds (user + system, whole process: a fairer figure
-on a shared machine), peak memory, band nodes, mean points per ball and the output's size; then
-the field's cost per network query, and how much of it the radius policy took (the selector's
-or the curvature estimate's share: compare ``--radius-mode learned`` with ``fixed``).
-Targets on the 2-core CI machine at 256: total <= 90 s, peak <= 4 GB.
+Each run (ours per resolution, then Poisson at depth 9) goes in a fresh child process so its peak
+resident memory (``ru_maxrss``) is its own. Prints one table row per resolution: wall seconds
+per stage (frame, band, udf, meshing, finish, total), the child's CPU seconds (user + system,
+whole process: a fairer figure on a shared machine), peak memory, band nodes, mean points per
+ball and the output's size; then Poisson's time and the ratio ours / Poisson; then the field's
+cost per network query, how much of it the radius policy took (the selector's or the curvature
+estimate's share: compare ``--radius-mode learned`` with ``fixed``), the mesher's stages and
+iterations, and the field's floor: network queries x multiply-adds per query / the
+multiply-add rate these cores reach on a large float32 matrix product, measured in the same run.
+Poisson needs open3d (requirements-bench.txt).
 """
 
 import argparse
@@ -47,7 +51,49 @@ def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mod
             "mean_patch_points": stats["mean_patch_points"], "vertices": stats["vertices"],
             "faces": stats["faces"], "device": stats["device"], "udf_source": udf_source,
             "network_queries": stats.get("network_queries", 0),
-            "radius_s": stats.get("seconds_radius", 0.0)}
+            "radius_s": stats.get("seconds_radius", 0.0),
+            "iterations": stats["meshing"].get("iterations", 0),
+            "macs_per_query": _macs_per_query(stats["mean_patch_points"])}
+
+
+def _macs_per_query(points: float) -> int:
+    """The backbone's multiply-adds for one query of ``points`` patch points."""
+    from engine.backbone import macs_per_query, weights_meta
+
+    return macs_per_query(weights_meta()["config"], max(int(round(points)), 1))
+
+
+def run_poisson(path: str) -> dict:
+    """Open3D screened Poisson (depth 9, the Table I baseline) once in this process."""
+    import time
+
+    sys.path.insert(0, str(ROOT))
+    from engine.bench.methods import make_poisson
+    from engine.io import read_point_cloud
+
+    cloud = read_point_cloud(path)
+    start = time.perf_counter()
+    mesh = make_poisson()(cloud)
+    seconds = time.perf_counter() - start
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return {"total": seconds, "cpu_s": usage.ru_utime + usage.ru_stime,
+            "peak_gib": usage.ru_maxrss / 2 ** 20, "faces": int(len(mesh.faces))}
+
+
+def multiply_add_rate(threads: int) -> float:
+    """Multiply-adds per second of a 2048^3 float32 matrix product on ``threads`` threads."""
+    import time
+
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    a = np.random.default_rng(0).random((2048, 2048), dtype=np.float32)
+    with threadpool_limits(threads):
+        a @ a  # warm-up
+        start = time.perf_counter()
+        for _ in range(3):
+            a @ a
+        return 3 * 2048 ** 3 / (time.perf_counter() - start)
 
 
 def main(argv=None) -> int:
@@ -57,8 +103,14 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default="cpu", choices=("auto", "cpu", "cuda"))
     parser.add_argument("--udf-source", default="network", choices=("network", "nearest"))
     parser.add_argument("--radius-mode", default="fixed", choices=("fixed", "curvature", "learned"))
+    parser.add_argument("--no-poisson", action="store_true",
+                        help="skip Open3D's Poisson (needs open3d) on the same cloud")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--poisson-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.poisson_child:
+        print(json.dumps(run_poisson(args.input)))
+        return 0
     if args.child:
         print(json.dumps(run_one(args.input, args.child, args.device, args.udf_source,
                                  args.radius_mode)))
@@ -70,7 +122,7 @@ def main(argv=None) -> int:
           f"radius mode {args.radius_mode}, "
           f"{os.cpu_count()} CPUs; seconds per stage")
     print(header)
-    details = []
+    details, totals, floors = [], [], []
     for resolution in args.resolutions:
         child = subprocess.run(
             [sys.executable, __file__, "--child", str(resolution), "--input", args.input,
@@ -86,13 +138,33 @@ def main(argv=None) -> int:
                 f"{row['mean_patch_points']:8.1f} {row['vertices']:8,d} {row['faces']:8,d}")
         mesher = ", ".join(f"{key[len('meshing_'):]} {value:.2f}" for key, value in row.items()
                            if key.startswith("meshing_"))
-        details.append(f"{resolution:>4} meshing stages (s): {mesher}; network on {row['device']}")
+        details.append(f"{resolution:>4} meshing stages (s): {mesher}; {row['iterations']} "
+                       f"iterations; network on {row['device']}")
+        totals.append((resolution, row["total"]))
+        floors.append((resolution, row["network_queries"] * row["macs_per_query"]))
         queries = max(row["network_queries"], 1)
         details.append(f"{resolution:>4} field: {row['network_queries']:,} network queries, "
                        f"{1e6 * row['udf'] / queries:.1f} us per query, of which radius policy "
                        f"{1e6 * row['radius_s'] / queries:.1f} us: it adds "
                        f"{100 * row['radius_s'] / max(row['udf'] - row['radius_s'], 1e-9):.0f}% "
                        f"to the rest of the field's time")
+    if not args.no_poisson:
+        child = subprocess.run([sys.executable, __file__, "--poisson-child", "--input", args.input],
+                               capture_output=True, text=True, cwd=ROOT)
+        if child.returncode != 0:
+            print(f"poisson failed:\n{child.stderr.strip()}")
+            return 1
+        poisson = json.loads(child.stdout.strip().splitlines()[-1])
+        print(f"poisson depth 9: {poisson['total']:.2f} s wall, {poisson['cpu_s']:.2f} cpu s, "
+              f"{poisson['peak_gib']:.2f} GiB, {poisson['faces']:,} faces")
+        for resolution, total in totals:
+            print(f"{resolution:>4} ours / poisson: {total / poisson['total']:.2f}x wall")
+    rate = multiply_add_rate(os.cpu_count() or 1)
+    details.append(f"matrix product rate on {os.cpu_count()} threads: {rate / 1e9:.1f} G "
+                   f"multiply-adds/s")
+    for resolution, floor_macs in floors:
+        details.append(f"{resolution:>4} field floor: {floor_macs / rate:.2f} s "
+                       f"(network queries x multiply-adds per query / that rate)")
     print("\n".join(details))
     return 0
 
