@@ -37,7 +37,8 @@ class MeshingSettings:
     lr: peak step of VectorAdam, voxels per iteration.
     normal_start: fraction of the iterations after which stage 2 (normal-constrained) starts.
     cut: keep one layer of the double cover (False keeps both layers).
-    min_component_faces: drop output pieces with fewer faces (0 keeps everything).
+    min_component_faces: drop output pieces with fewer faces (0: no limit; specks, the crumbs
+        a noisy cover leaves, go either way: see :func:`.cleanup.find_specks`).
     seed: kept for reproducible settings; the layer choice itself draws no random numbers.
     device: ``auto``, ``cpu`` or ``cuda``: where the optimisation runs. ``cuda`` (and ``auto``
         when PyTorch sees a GPU) runs it in torch on the GPU; ``cpu`` in numpy (faster on a CPU
