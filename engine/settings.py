@@ -262,7 +262,7 @@ def _check_value(name: str, value, kind: type, info: SettingInfo) -> None:
     """Refuse a setting of the wrong type, outside its choices or outside its range.
 
     Integers (Python or numpy) for int settings, never floats, which would be truncated
-    silently; real finite numbers for float settings; strings for str settings. Booleans are
+    without a word; real finite numbers for float settings; strings for str settings. Booleans are
     never numbers here.
     """
     label = name.replace("_", " ")

@@ -10,13 +10,15 @@ import sys
 import numpy as np
 
 from ..errors import InputError
+from ..io import WRITE_FORMATS
 from ..settings import DEVICES, MAX_SEED
 
 
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
     parser.add_argument("grid", help="UDF grid (.npz with udf, origin, spacing)")
-    parser.add_argument("output", help="output mesh (.ply, .obj, .off or .stl); never the grid")
+    parser.add_argument("output", help="output mesh ("
+                        + ", ".join(f".{f.lower()}" for f in WRITE_FORMATS) + "); never the grid")
     parser.add_argument("--iso", default=None,
                         help="marching-cubes level: '1.0h' in voxels, or an absolute distance "
                              "(default: automatic, about 1 voxel)")

@@ -16,16 +16,18 @@ import threading
 import time
 
 from ..errors import Cancelled, InputError
+from ..io import READ_FORMATS, WRITE_FORMATS
 from ..settings import ReconstructSettings
 from .settings_args import add_settings_arguments
 
 
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
-    parser.add_argument("input", help="point cloud or mesh file (.ply, .obj, .off, .stl, .xyz, "
-                                      ".pts, .txt, .npy, .npz, .las, .laz)")
-    parser.add_argument("output", help="mesh file to write (.ply, .obj, .off or .stl); never "
-                                       "the input")
+    parser.add_argument("input", help="point cloud or mesh file ("
+                                      + ", ".join(f".{f.lower()}" for f in READ_FORMATS) + ")")
+    parser.add_argument("output", help="mesh file to write ("
+                                       + ", ".join(f".{f.lower()}" for f in WRITE_FORMATS)
+                                       + "); never the input")
     add_settings_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="print only errors")
 
