@@ -169,6 +169,10 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
                if settings.outliers == "auto" and outliers < AUTO_SHARE * given else "")
         messages.insert(0, f"dropped {outliers:,} isolated points ({share:.1f} %) as outliers"
                            f"{why}; set outliers to 'keep' to use every point")
+    elif outliers_found:
+        share = 100.0 * outliers_found / given
+        messages.insert(0, f"kept {outliers_found:,} isolated points ({share:.2f} %): too few "
+                           f"to be outliers; set outliers to 'drop' to remove them")
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")

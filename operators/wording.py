@@ -61,6 +61,7 @@ def sentence(text: str) -> str:
 
 
 _OUTLIERS = re.compile(r"dropped ([\d,]+) isolated points \(([\d.]+) %\)")
+_KEPT = re.compile(r"kept ([\d,]+) isolated points \(([\d.]+) %\)")
 _SPARSE = re.compile(r"the balls hold only ([\d.]+) points")
 
 
@@ -77,6 +78,11 @@ def user_notices(messages, radius_mode: str = "fixed") -> list:
         if match:
             notices.append(f"Dropped {match.group(1)} stray points ({match.group(2)} %) before "
                            f"meshing. To use every point, set Advanced > Outliers to Keep.")
+            continue
+        match = _KEPT.search(message)
+        if match:
+            notices.append(f"Kept {match.group(1)} stray-looking points ({match.group(2)} %): "
+                           f"too few to drop. To remove them, set Advanced > Outliers to Drop.")
             continue
         match = _SPARSE.search(message)
         if match:

@@ -389,16 +389,20 @@ def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
     notes = ["dropped 1,234 isolated points (2.5 %) as outliers; set outliers to 'keep' to use "
              "every point",
              "the balls hold only 3.2 points on average; for a cloud this sparse, raise the "
-             "radius"] + MESHER_JARGON
+             "radius",
+             "kept 20 isolated points (0.25 %): too few to be outliers; set outliers to 'drop' "
+             "to remove them"] + MESHER_JARGON
     quick.udf_reconstruction.radius_mode = "learned"
     reconstruct, job = finished_job(extension, quick, notes)
     reports = Reports()
     reconstruct.finish_job(reports, bpy.context, job)
     warnings = [message for kind, message in reports.messages if kind == {'WARNING'}]
-    assert len(warnings) == 2, warnings
+    assert len(warnings) == 3, warnings
     assert "Dropped 1,234 stray points (2.5 %)" in warnings[0]
     assert "Advanced > Outliers to Keep" in warnings[0]
     assert "raise Largest Radius" in warnings[1]
+    assert "Kept 20 stray-looking points (0.25 %)" in warnings[2]
+    assert "Advanced > Outliers to Drop" in warnings[2]
     for _, message in reports.messages:
         assert message[0].isupper() and message.endswith("."), message
 

@@ -72,7 +72,10 @@ def test_auto_keeps_a_few_flagged_points_and_drop_drops_them():
                        udf_source="nearest")
     assert auto.stats["outliers"] == 0 and auto.stats["outliers_found"] >= 18
     assert auto.stats["points"] == len(points)
-    assert not any("outliers" in message for message in auto.messages)
+    # the user is told what was found, and how to drop it
+    found = auto.stats["outliers_found"]
+    assert auto.messages[0].startswith(f"kept {found} isolated points (0."), auto.messages
+    assert "set outliers to 'drop'" in auto.messages[0]
     drop = reconstruct(points, ReconstructSettings(resolution=32, device="cpu", outliers="drop"),
                        udf_source="nearest")
     assert drop.stats["outliers"] >= 18
