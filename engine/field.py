@@ -35,7 +35,7 @@ import numpy as np
 from .cpu_threads import cpu_threads, run_in_threads
 from .devices import resolve_device
 from .errors import InputError
-from .meshing import UDFGrid
+from .udf_grid import UDFGrid
 from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
                       patches_from_neighbours)
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress

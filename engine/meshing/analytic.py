@@ -1,7 +1,7 @@
 """Analytic surfaces with exact distances and closest points, for tests and benchmarks.
 
 Each shape is a callable ``shape(points (P, 3)) -> (distances (P,), closest points (P, 3))`` in
-world units, the ``exact`` form :class:`~.grid_field.UDFGrid` accepts. :func:`sample_grid` bakes
+world units, the ``exact`` form :class:`~engine.udf_grid.UDFGrid` accepts. :func:`sample_grid` bakes
 one into a grid over a box.
 """
 
@@ -9,7 +9,7 @@ from typing import Callable, Sequence, Tuple
 
 import numpy as np
 
-from .grid_field import UDFGrid
+from ..udf_grid import UDFGrid
 
 Shape = Callable[[np.ndarray], Tuple[np.ndarray, np.ndarray]]
 

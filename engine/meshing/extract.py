@@ -17,7 +17,7 @@ from ..geometry import Mesh
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from ..settings import DEVICES
 from .cleanup import clean_mesh
-from .grid_field import UDFGrid
+from ..udf_grid import UDFGrid
 from .layers import (choose_layer, close_pinholes, drop_facing_pairs, drop_flaps,
                      extend_rims, peel_lips)
 from .marching import double_cover

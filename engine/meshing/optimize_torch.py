@@ -13,7 +13,7 @@ import numpy as np
 
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
-from .grid_field import BRICK, UDFGrid
+from ..udf_grid import BRICK, UDFGrid
 from .optimize import (BETA1, BETA2, EPS, ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START,
                        END_LIMIT, PROJECT_AFTER, PROJECT_BEFORE, START_OFFSET,
                        StallCheck, distance_summary, final_stats, learning_rate)

@@ -17,7 +17,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from ..errors import InputError
+from .errors import InputError
 
 BRICK = 4  # cells per brick side
 _NODES = BRICK + 1
