@@ -19,7 +19,7 @@ thread (:class:`_Cover`); the vertices come out the same, bit for bit, on any nu
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 
@@ -34,10 +34,7 @@ SPLIT_VERTICES = 32768  # covers with fewer vertices run on one thread
 BETA1, BETA2, EPS = 0.9, 0.999, 1e-8  # VectorAdam
 # The defaults of the optimisation (and of MeshingSettings): iterations of both stages, stage 1's
 # smoothing weight (voxel units), peak step (voxels per iteration), start of stage 2 (fraction)
-ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START = 60, 4.0, 0.05, 0.75
-# Closest-point jumps before and after the iterations (see :func:`project_onto_field`), how far
-# off the zero set (voxels) the jump before leaves each vertex, and the longest jump after.
-PROJECT_BEFORE, PROJECT_AFTER, START_OFFSET, END_LIMIT = 1, 2, 0.25, 0.5
+ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START = 200, 4.0, 0.05, 0.75
 
 
 @dataclass
@@ -55,28 +52,6 @@ def learning_rate(it: int, total: int, lr: float) -> float:
     warm = max(1, total // 16)
     rate = lr * min(1.0, (it + 1) / warm) * 0.5 * (1.0 + np.cos(np.pi * it / total))
     return rate * (0.1 if it >= total // 2 else 1.0)
-
-
-def project_onto_field(field, g: np.ndarray, steps: int, offset: float = 0.0,
-                       limit: float = np.inf) -> np.ndarray:
-    """Move each point (grid index coordinates, in place) along its closest-point vector to
-    ``offset`` voxels from the field's zero set, at most ``limit`` voxels per step, ``steps``
-    times. Points outside the field's band, or already within ``offset``, stay where they are.
-
-    The cover starts ``iso`` (1-2 voxels) off the surface, and VectorAdam's small steps alone need
-    about a hundred iterations to cross that. A jump to a small offset first leaves the iterations
-    only the smoothing and the last fraction of a voxel; the offset keeps each of the cover's
-    two layers on its own side of the surface, where the direction to the surface is still
-    well defined. The jumps after the iterations (offset 0) undo the smoothing's pull off the
-    surface; their ``limit`` keeps the few vertices left far off (at rims and junctions, where
-    the closest point changes sheets) from folding their faces over.
-    """
-    for _ in range(steps):
-        distance, vector = field.closest_index(g)
-        inside = np.flatnonzero(np.isfinite(distance) & (distance > offset))
-        scale = np.minimum(1.0 - offset / distance[inside], limit / distance[inside])
-        g[inside] -= vector[inside] * scale[:, None]
-    return g
 
 
 def _unit_inplace(vectors: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -234,8 +209,7 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
                    lr: float = LR, normal_start: float = NORMAL_START,
                    progress: Optional[ProgressFn] = None,
                    cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
-                   early_stop: bool = True, threads: Optional[int] = None,
-                   project: Tuple[int, int] = (PROJECT_BEFORE, PROJECT_AFTER)):
+                   early_stop: bool = True, threads: Optional[int] = None):
     """Pull a double cover onto the zero set of ``field``.
 
     Parameters
@@ -262,9 +236,6 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
         the mean and max vertex and centroid distances still improve (by ``STALL_MEAN`` /
         ``STALL_MAX`` voxels) and stop when they stall. (Stopping stage 1 early the same way
         leaves thicker folds at open rims: its smoothing still works after the distances stall.)
-    project : (int, int)
-        Closest-point jumps onto the zero set before and after the iterations
-        (:func:`project_onto_field`); ``(0, 0)`` is DCUDF's plain optimisation.
     threads : int, optional
         CPU threads; by default :func:`~engine.cpu_threads.cpu_threads` for covers of at least
         ``SPLIT_VERTICES`` vertices, else one. The result does not depend on it.
@@ -280,8 +251,7 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
     parts = max(1, min(int(threads), len(vertices), len(faces)))
     if edges is None:
         edges = mesh_ops.edge_topology(faces).edges
-    start = project_onto_field(field, field.world_to_index(vertices), project[0], START_OFFSET)
-    cover = _Cover(start, faces, edges, field, laplacian_weight, parts)
+    cover = _Cover(field.world_to_index(vertices), faces, edges, field, laplacian_weight, parts)
     stage2 = int(round(normal_start * iterations))
     quiet = max(stage2, iterations // 2)  # stage 2 with the small step: may stop early
     stall = StallCheck(quiet, early_stop)
@@ -313,7 +283,6 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
                 break
             ran += 1
             run(cover.step_pass, stage1, learning_rate(it, iterations, lr), ran)
-        project_onto_field(field, cover.g, project[1], limit=END_LIMIT)
         run(cover.face_pass, True, False)
         run(cover.vertex_pass, False)
     finally:

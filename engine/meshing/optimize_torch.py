@@ -7,7 +7,7 @@ numpy version, apart from the field's float32 interpolation coefficients (as in 
 give the same vertices up to rounding. torch is imported only when this module is used.
 """
 
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 
@@ -15,7 +15,6 @@ from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from . import mesh_ops
 from ..udf_grid import BRICK, UDFGrid
 from .optimize import (BETA1, BETA2, EPS, ITERATIONS, LAPLACIAN_WEIGHT, LR, NORMAL_START,
-                       END_LIMIT, PROJECT_AFTER, PROJECT_BEFORE, START_OFFSET,
                        StallCheck, distance_summary, final_stats, learning_rate)
 
 _CELLS = BRICK ** 3
@@ -90,25 +89,13 @@ def _face_normals(g, faces):
     return cross / norm.clamp_min(1e-300)[:, None], 0.5 * norm
 
 
-def _project(query, g, steps: int, offset: float = 0.0, limit: float = float("inf")) -> None:
-    """:func:`.optimize.project_onto_field` on the device (in place)."""
-    import torch
-
-    for _ in range(steps):
-        distance, vector = query.closest_index(g)
-        inside = torch.isfinite(distance) & (distance > offset)
-        scale = torch.minimum(1.0 - offset / distance[inside], limit / distance[inside])
-        g[inside] -= vector[inside] * scale[:, None]
-
-
 def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid,
                          iterations: int = ITERATIONS,
                          laplacian_weight: float = LAPLACIAN_WEIGHT, lr: float = LR,
                          normal_start: float = NORMAL_START,
                          progress: Optional[ProgressFn] = None,
                          cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
-                         early_stop: bool = True, device: str = "cuda",
-                         project: Tuple[int, int] = (PROJECT_BEFORE, PROJECT_AFTER)):
+                         early_stop: bool = True, device: str = "cuda"):
     """:func:`.optimize.optimize_cover` on a torch device; same parameters and results.
 
     ``field`` must be a grid (no exact callable: analytic fields stay in numpy).
@@ -129,7 +116,6 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
     query = _DeviceField(field, device)
     faces_t = torch.from_numpy(np.asarray(faces, dtype=np.int64)).to(device)
     g = torch.from_numpy(field.world_to_index(vertices)).to(device)
-    _project(query, g, project[0], START_OFFSET)
     ratio = n / max(m, 1)
     stage2 = int(round(normal_start * iterations))
     quiet = max(stage2, iterations // 2)
@@ -173,7 +159,6 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
         denom = torch.sqrt(vel / (1 - beta2 ** ran)) + eps
         step = learning_rate(it, iterations, lr) / (1 - beta1 ** ran)
         g -= step * (mom / denom[:, None])
-    _project(query, g, project[1], limit=END_LIMIT)
     dv, _ = query.closest_index(g)
     dc, _ = query.closest_index(cen @ g)
     return (field.index_to_world(g.cpu().numpy()),
