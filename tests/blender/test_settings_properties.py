@@ -5,7 +5,8 @@ operator reads them back into the engine's settings."""
 from dataclasses import dataclass, fields
 
 import bpy
-import numpy as np
+
+from tests.blender.helpers import add_cloud, sphere_points
 
 
 def test_every_setting_is_a_panel_property_with_its_label_default_and_range(scene, extension):
@@ -68,28 +69,13 @@ def test_a_new_setting_appears_in_the_generated_properties(scene, extension):
         bpy.utils.unregister_class(group)
 
 
-def _add_cloud(name: str, count: int = 2000):
-    """A vertex-only mesh object with points on a sphere, selected and active."""
-    directions = np.random.default_rng(0).normal(size=(count, 3))
-    points = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(count)
-    mesh.attributes["position"].data.foreach_set("vector", points.astype(np.float32).ravel())
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    return obj
-
-
 def test_the_operator_reads_every_panel_value_into_the_engine_settings(scene, extension):
     settings = extension.module("engine.settings")
     reconstruct = extension.module("operators.reconstruct")
     props = scene.udf_reconstruction
     props.radius, props.rho_min, props.outlier_ratio = 0.021, 0.55, 3.3
     props.udf_source, props.radius_mode, props.seed = "nearest", "learned", 12
-    _add_cloud("Scan")
+    add_cloud("Scan", sphere_points(2000, 1.0))
     job = reconstruct.start_job(bpy.context)
     try:
         assert job.settings == settings.ReconstructSettings(
