@@ -25,6 +25,7 @@ import os
 import resource
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,8 +66,6 @@ def _macs_per_query(points: float) -> int:
 
 def run_poisson(path: str) -> dict:
     """Open3D screened Poisson (depth 9, the Table I baseline) once in this process."""
-    import time
-
     sys.path.insert(0, str(ROOT))
     from engine.bench.methods import make_poisson
     from engine.io import read_point_cloud
@@ -82,8 +81,6 @@ def run_poisson(path: str) -> dict:
 
 def multiply_add_rate(threads: int) -> float:
     """Multiply-adds per second of a 2048^3 float32 matrix product on ``threads`` threads."""
-    import time
-
     import numpy as np
     from threadpoolctl import threadpool_limits
 
