@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from engine.devices import resolve_device  # noqa: E402
 from engine.meshing import MeshingSettings, extract_surface  # noqa: E402
-from engine.meshing import analytic as A  # noqa: E402
+from lab import analytic as A  # noqa: E402
 
 
 def main():

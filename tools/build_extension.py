@@ -76,7 +76,7 @@ PYTHON_VERSIONS = tuple(BLENDER_NUMPY)
 NOT_BUNDLED = {"numpy", "torch"}
 # What gets copied for staging; Blender's build then applies the manifest's exclude patterns.
 STAGE_SKIP = {".venv", ".git", ".cache", ".pytest_cache", "dist", "build", "out", "wheels",
-              "tests", "docs", "tools", "benchmarks", "bench_results", "__pycache__"}
+              "tests", "docs", "tools", "benchmarks", "bench_results", "lab", "__pycache__"}
 
 
 def _normal(name: str) -> str:

@@ -5,8 +5,8 @@ import pytest
 
 from engine.__main__ import main
 from engine.errors import InputError
-from engine.meshing import analytic as A
 from engine.commands.mesh_udf import load_grid, parse_iso
+from lab import analytic as A
 
 
 def write_grid(path, **overrides):

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.meshing import analytic as A
 from engine.meshing import marching
 from engine.meshing import mesh_ops as mo
+from lab import analytic as A
 
 CENTER = np.array([0.3, -0.2, 0.7])
 

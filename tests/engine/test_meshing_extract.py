@@ -8,9 +8,9 @@ import pytest
 
 from engine.errors import Cancelled
 from engine.meshing import MeshingSettings, UDFGrid, extract_surface
-from engine.meshing import analytic as A
 from engine.meshing import mesh_ops as mo
 from engine.metrics import double_layer_share
+from lab import analytic as A
 
 RES = 64
 H = 1.0 / (RES - 1)  # voxel size over [-0.5, 0.5]

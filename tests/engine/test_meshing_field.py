@@ -5,7 +5,7 @@ import pytest
 
 from engine.errors import InputError
 from engine.meshing import UDFGrid
-from engine.meshing import analytic as A
+from lab import analytic as A
 
 
 def test_plane_between_nodes_is_exact():

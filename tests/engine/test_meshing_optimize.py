@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from engine.meshing import analytic
 from engine.meshing.marching import double_cover
 from engine.meshing.optimize import optimize_cover
+from lab import analytic
 
 
 @pytest.mark.parametrize("shape", [analytic.sphere(radius=0.6), analytic.disk(radius=0.6)],

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.meshing import analytic
 from engine.meshing.extract import MeshingSettings, extract_surface
 from engine.meshing.marching import double_cover
 from engine.meshing.optimize import optimize_cover
+from lab import analytic
 
 torch = pytest.importorskip("torch")
 

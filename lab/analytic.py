@@ -9,7 +9,7 @@ from typing import Callable, Sequence, Tuple
 
 import numpy as np
 
-from ..udf_grid import UDFGrid
+from engine.udf_grid import UDFGrid
 
 Shape = Callable[[np.ndarray], Tuple[np.ndarray, np.ndarray]]
 
