@@ -4,8 +4,8 @@ The CLI, the Blender operator, the batch script and the benchmark all call :func
 none of them re-implements a stage. The stages (DESIGN.md, "Data flow"):
 
 1. validate the settings; refuse clouds no surface can be built from; drop isolated points
-   when there are many or they stretch the bounding box (:mod:`.outliers`); put the points in
-   the unit frame;
+   when there are many or they stretch the bounding box (:mod:`.outliers`); choose the cell
+   size and put the points in the working frame (:mod:`.detail`);
 2. evaluate the UDF on the grid band near the points (:mod:`.field`);
 3. extract a single-layer mesh with DCUDF (:mod:`.meshing`);
 4. map the mesh back to the input's coordinates (the same similarity transform, inverted) and
@@ -20,7 +20,8 @@ import numpy as np
 
 from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
-from .frame import UnitFrame, validate_points
+from .detail import AUTO_MAX_CELLS, choose_detail
+from .frame import validate_points
 from .geometry import Mesh, PointCloud
 from .outliers import AUTO_SHARE, AUTO_SHRINK, box_shrink, find_outliers
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
@@ -50,7 +51,8 @@ class ReconstructResult:
         them when they are few and do not stretch the bounding box), ``grid_shape``,
         ``spacing``, ``band_radius``, ``band_nodes``,
         ``queries`` (backbone evaluations), ``sparse_balls``, ``mean_patch_points``,
-        ``udf_source``, ``device``, ``iso`` (unit frame), ``components`` (pieces of the output),
+        ``udf_source``, ``device``, ``iso`` (working frame), ``voxel_size`` (cell length, input units), ``cells`` (along the
+        longest side), ``components`` (pieces of the output),
         ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
     """
 
@@ -72,7 +74,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
         The points in any units; ``colors`` (N, 3|4) in [0, 1] are carried to the mesh.
     settings : ReconstructSettings or dict, optional
         Defaults to ``ReconstructSettings()``; a dict names settings to change from the
-        defaults. Radii and resolution are in the unit frame.
+        defaults. Radii are in the working frame (:mod:`.detail`).
     progress : callable ``(fraction, message)``, optional
         Called with fractions rising from 0 to 1 over the whole reconstruction.
     cancel : callable ``() -> bool``, optional
@@ -120,7 +122,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
         points, colors, settings, sub_progress(progress, 0.0, _OUTLIERS_END), cancel)
     timings["outliers"] = time.perf_counter() - mark
     check_cancel(cancel)
-    frame = UnitFrame.from_points(points)
+    detail = choose_detail(points, settings)
+    frame = detail.frame
     points_unit = frame.to_unit(points)
     tree = cKDTree(points_unit)
     timings["frame"] = time.perf_counter() - started - timings["outliers"]
@@ -155,6 +158,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings["total"] = time.perf_counter() - started
 
     stats = {"points": int(len(points_unit)), "outliers": outliers,
+             "voxel_size": detail.voxel_size, "cells": detail.cells,
              "outliers_found": outliers_found, **band.stats,
              "queries": (band.stats["network_queries"] - band.stats["sparse_balls"]
                          if udf_source == "network" else 0),
@@ -173,6 +177,10 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
         share = 100.0 * outliers_found / given
         messages.insert(0, f"kept {outliers_found:,} isolated points ({share:.2f} %): too few "
                            f"to be outliers; set outliers to 'drop' to remove them")
+    if detail.capped:
+        messages.append(f"auto detail stops at {AUTO_MAX_CELLS} cells along the longest side "
+                        f"({detail.voxel_size:.3g} units per cell); set Detail to Voxel Size for "
+                        f"finer cells")
     if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")

@@ -38,6 +38,8 @@ class SettingInfo:
     choices: the allowed values (an enum in the panel, ``choices`` on the command line).
     low, high: the allowed range, inclusive (None: unbounded).
     ui: extra keywords of the Blender property (soft limits, step, precision, subtype).
+    implies: ``(setting, value)`` that giving this setting's command-line flag also sets,
+        unless that setting was given a value of its own (``--voxel-size`` sets ``detail``).
     """
 
     label: str
@@ -47,6 +49,7 @@ class SettingInfo:
     low: Optional[float] = None
     high: Optional[float] = None
     ui: Tuple[Tuple[str, object], ...] = ()
+    implies: Tuple[Tuple[str, object], ...] = ()
 
     @property
     def cli_help(self) -> str:
@@ -58,11 +61,11 @@ class SettingInfo:
 
 
 def setting(default, label: str, description: str, *, help: str = "", choices=(), low=None,
-            high=None, **ui):
+            high=None, implies=(), **ui):
     """A field of :class:`ReconstructSettings` with its :class:`SettingInfo`; extra keywords
     go to the Blender property as they are (``soft_max=0.06``, ``precision=3``)."""
     info = SettingInfo(label, description, help, tuple(choices), low, high,
-                       tuple(sorted(ui.items())))
+                       tuple(sorted(ui.items())), tuple(implies))
     return field(default=default, metadata={"setting": info})
 
 
@@ -96,6 +99,14 @@ OUTLIER_CHOICES = (
     Choice("drop", "Drop", "Always drop points isolated from the surface"),
     Choice("keep", "Keep", "Use every point"),
 )
+DETAIL_CHOICES = (
+    Choice("auto", "Auto", "Resolution cells along the cloud's longest side for up to 50,000 "
+                           "points; finer cells for denser clouds, so each cell holds about "
+                           "as many points"),
+    Choice("resolution", "Resolution", "Exactly Resolution cells along the cloud's longest "
+                                       "side"),
+    Choice("voxel_size", "Voxel Size", "Cells of a set length in the cloud's own units"),
+)
 UDF_SOURCE_CHOICES = (
     Choice("network", "Network", "The learned network judges the distance to the surface"),
     Choice("nearest", "Nearest Point", "The distance to the nearest point, without the network "
@@ -117,7 +128,9 @@ DEFAULT_OUTLIER_RATIO = 2.5
 
 @dataclass
 class ReconstructSettings:
-    """How to reconstruct. All lengths are in the unit frame (bounding box longest side 1).
+    """How to reconstruct. Radii are lengths in the working frame, where a grid cell is
+    ``1 / resolution`` (:mod:`engine.detail`): the unit frame (bounding box longest side 1) unless
+    ``detail`` makes the cells finer; ``voxel_size`` is in the input's units.
 
     Each field's metadata says what it means (:func:`setting_info`).
     """
@@ -132,16 +145,18 @@ class ReconstructSettings:
         choices=RADIUS_MODE_CHOICES)
     radius: float = setting(
         0.018, "Radius",
-        "Neighbourhood size as a fraction of the cloud's longest side. Larger fills holes and "
-        "smooths noise; smaller keeps thin parts and detail",
-        help="ball radius of the fixed mode, unit frame",
+        "Neighbourhood size, as a fraction of Resolution cells (the cloud's longest side unless "
+        "Detail makes the cells finer). Larger fills holes and smooths noise; smaller keeps "
+        "thin parts and detail",
+        help="ball radius of the fixed mode, working frame",
         low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
     parent_radius: float = setting(
         0.024, "Largest Radius",
-        "The biggest neighbourhood any spot may use, as a fraction of the cloud's longest "
-        "side. Each spot gets a radius between Range Min and Max times this. Larger fills "
-        "holes and smooths noise; smaller keeps thin parts and detail",
-        help="parent ball radius R of the curvature and learned modes, unit frame",
+        "The biggest neighbourhood any spot may use, as a fraction of Resolution cells (the "
+        "cloud's longest side unless Detail makes the cells finer). Each spot gets a radius "
+        "between Range Min and Max times this. Larger fills holes and smooths noise; smaller "
+        "keeps thin parts and detail",
+        help="parent ball radius R of the curvature and learned modes, working frame",
         low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
     rho_min: float = setting(
         0.5, "Min", "Smallest radius a spot may get, as a share of the Largest Radius",
@@ -155,8 +170,22 @@ class ReconstructSettings:
         256, "Resolution",
         "Grid cells along the cloud's longest side. Higher keeps finer detail but takes longer "
         "and uses more memory (about 8x per doubling)",
-        help="grid cells along the longest side of the bounding box",
+        help="grid cells along the longest side of the bounding box (with --detail auto: "
+             "for clouds of up to 50,000 points, finer for denser ones)",
         low=32, high=1024, soft_min=64, soft_max=512)
+    detail: str = setting(
+        "auto", "Detail", "How the size of the grid cells is chosen",
+        help="how the grid's cell size is chosen: auto (Resolution cells along the longest "
+             "side, finer for clouds denser than 50,000 points), resolution (exactly "
+             "Resolution cells) or voxel_size (cells of --voxel-size in the input's units); "
+             "ball radii are measured in Resolution cells, so they follow the cells",
+        choices=DETAIL_CHOICES)
+    voxel_size: float = setting(
+        0.01, "Voxel Size",
+        "Length of a grid cell in the cloud's own units, when Detail is Voxel Size. Smaller "
+        "keeps finer detail but takes longer and uses more memory",
+        help="cell length in the input's units; giving it sets --detail voxel_size",
+        implies=(("detail", "voxel_size"),), low=1e-9, high=1e9, soft_min=0.0001, soft_max=10.0, precision=4, subtype="DISTANCE")
     device: str = setting(
         "auto", "Device", "Where the neural network runs",
         help="where the networks run: auto (CUDA when PyTorch sees a GPU), cpu or cuda",

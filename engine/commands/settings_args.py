@@ -33,5 +33,21 @@ def add_settings_arguments(parser, settings_type=ReconstructSettings,
             options["type"] = type(default)
         if info.choices:
             options["choices"] = info.values
+        if info.implies:
+            defaults = {f.name: f.default if use_defaults else None for f in fields(settings_type)}
+            options["action"] = _implying(info.implies, defaults)
         parser.add_argument(flag(item.name), **options)
 
+
+def _implying(implies, defaults: dict):
+    """An argparse action that stores its value and also sets each ``(setting, value)`` of
+    ``implies`` whose flag was not given before it (it still holds its default)."""
+
+    class Implying(argparse.Action):
+        def __call__(self, parser, namespace, values, option_string=None):
+            setattr(namespace, self.dest, values)
+            for name, value in implies:
+                if getattr(namespace, name) == defaults[name]:
+                    setattr(namespace, name, value)
+
+    return Implying
