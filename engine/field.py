@@ -89,6 +89,7 @@ class BandField:
 
 
 def grid_layout(points: np.ndarray, resolution: int, band_radius: float,
+                anchor: Optional[np.ndarray] = None, bounds=None,
                 ) -> Tuple[Tuple[int, int, int], np.ndarray, float]:
     """The grid that holds the band of ``points``.
 
@@ -97,6 +98,11 @@ def grid_layout(points: np.ndarray, resolution: int, band_radius: float,
     points : (N, 3) float array, unit frame
     resolution : grid cells along the longest side of the unit frame (spacing 1 / resolution)
     band_radius : R, the largest ball radius (unit frame)
+    anchor : (3,) float, optional
+        A node of a larger grid (a tiled reconstruction's): the grid's nodes are that grid's
+        nodes. Without, the grid is centred on the points' bounding box.
+    bounds : ``(low, high)`` (3,) float arrays, optional, with ``anchor``
+        Clip the grid to this box (a tile's core and halo).
 
     Returns
     -------
@@ -107,6 +113,14 @@ def grid_layout(points: np.ndarray, resolution: int, band_radius: float,
     spacing = 1.0 / resolution
     low, high = points.min(axis=0), points.max(axis=0)
     margin = math.ceil(band_radius / spacing) + MARGIN_NODES
+    if anchor is not None:
+        low, high = low - margin * spacing, high + margin * spacing
+        if bounds is not None:
+            low, high = np.maximum(low, bounds[0]), np.minimum(high, bounds[1])
+        start = np.floor((low - anchor) / spacing).astype(np.int64)
+        stop = np.ceil((high - anchor) / spacing).astype(np.int64)
+        shape = tuple(int(n) for n in np.maximum(stop - start + 1, 2))
+        return shape, anchor + start * spacing, spacing
     cells = np.ceil((high - low) / spacing - 1e-9).astype(np.int64)
     shape = tuple(int(c) + 1 + 2 * margin for c in cells)
     centre = 0.5 * (low + high)
@@ -122,7 +136,8 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     Parameters
     ----------
     tree : scipy.spatial.cKDTree over ``points``
-    points : (N, 3) float array, unit frame, inside the grid with its margin
+    points : (N, 3) float array, unit frame; points outside the grid are passed over (a tile's
+        grid: nodes near its edge may then miss the band, which its halo allows for)
     shape, origin, spacing : the grid (see :func:`grid_layout`)
     band_radius : R, unit frame
     cancel : optional cancel check, called between chunks
@@ -135,6 +150,7 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     from scipy import ndimage
 
     voxels = np.rint((points - origin) / spacing).astype(np.int64)
+    voxels = voxels[np.all((voxels >= 0) & (voxels < np.asarray(shape)), axis=1)]
     occupied = np.zeros(shape, dtype=np.uint8)
     occupied[voxels[:, 0], voxels[:, 1], voxels[:, 2]] = 1
     # a node within R of p is within R/h + 1/2 nodes of p's nearest node along every axis
@@ -185,7 +201,8 @@ def backbone_predictor(device: str) -> Predictor:
 def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSettings] = None,
                      progress: Optional[ProgressFn] = None, cancel: Optional[CancelFn] = None,
                      udf_source: str = "network", tree=None,
-                     predictor: Optional[Predictor] = None) -> BandField:
+                     predictor: Optional[Predictor] = None, anchor: Optional[np.ndarray] = None,
+                     bounds=None) -> BandField:
     """Evaluate the unsigned distance field on the band of grid nodes near the points.
 
     Parameters
@@ -202,6 +219,9 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     tree : scipy.spatial.cKDTree over ``points_unit``, optional (built when missing)
     predictor : callable, optional
         Replaces the backbone (same signature as :func:`backbone_predictor`'s result).
+    anchor, bounds : optional
+        Put the grid's nodes on a larger grid's and clip it to a box (a tile; see
+        :func:`grid_layout`).
 
     Returns
     -------
@@ -224,7 +244,8 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     progress(0.0, "finding the query band")
     spacing = 1.0 / settings.resolution
     band_radius = max(max_radius(settings), MIN_BAND_NODES * spacing)
-    shape, origin, spacing = grid_layout(points, settings.resolution, band_radius)
+    shape, origin, spacing = grid_layout(points, settings.resolution, band_radius, anchor,
+                                         bounds)
     indices, nearest = find_band(tree, points, shape, origin, spacing, band_radius, cancel)
     seconds_band = time.perf_counter() - started
     stats = {"grid_shape": shape, "spacing": spacing, "band_radius": band_radius,

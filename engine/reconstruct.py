@@ -96,7 +96,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     """
     from scipy.spatial import cKDTree
 
-    from .meshing import extract_surface
+    from .meshing import MeshingResult, extract_surface
+    from .tiles import mesh_in_tiles, tile_size
 
     started = time.perf_counter()
     progress = progress or no_progress
@@ -129,16 +130,26 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings["frame"] = time.perf_counter() - started - timings["outliers"]
     check_cancel(cancel)
 
-    band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
-                            cancel, udf_source=udf_source, tree=tree)
-    timings["band"] = band.stats.pop("seconds_band")
-    timings["udf"] = band.stats.pop("seconds_udf")
-    check_cancel(cancel)
+    tile_cells = tile_size(detail, settings)
+    if tile_cells:
+        mark = time.perf_counter()
+        vertices, faces, field_stats, mesh_stats = mesh_in_tiles(
+            points_unit, settings, meshing_settings(settings), tile_cells, udf_source,
+            sub_progress(progress, 0.01, _MESH_END), cancel)
+        timings["tiles"] = time.perf_counter() - mark
+        meshed = MeshingResult(Mesh(vertices, faces), float("nan"), {}, [], mesh_stats)
+    else:
+        band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
+                                cancel, udf_source=udf_source, tree=tree)
+        timings["band"] = band.stats.pop("seconds_band")
+        timings["udf"] = band.stats.pop("seconds_udf")
+        field_stats = band.stats
+        check_cancel(cancel)
 
-    mark = time.perf_counter()
-    meshed = extract_surface(band.grid, meshing_settings(settings),
-                             sub_progress(progress, _FIELD_END, _MESH_END), cancel)
-    timings["meshing"] = time.perf_counter() - mark
+        mark = time.perf_counter()
+        meshed = extract_surface(band.grid, meshing_settings(settings),
+                                 sub_progress(progress, _FIELD_END, _MESH_END), cancel)
+        timings["meshing"] = time.perf_counter() - mark
     check_cancel(cancel)
 
     mark = time.perf_counter()
@@ -159,8 +170,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 
     stats = {"points": int(len(points_unit)), "outliers": outliers,
              "voxel_size": detail.voxel_size, "cells": detail.cells,
-             "outliers_found": outliers_found, **band.stats,
-             "queries": (band.stats["network_queries"] - band.stats["sparse_balls"]
+             "outliers_found": outliers_found, **field_stats,
+             "queries": (field_stats["network_queries"] - field_stats["sparse_balls"]
                          if udf_source == "network" else 0),
              "iso": float(meshed.iso), "components": _piece_count(result_mesh),
              "vertices": int(len(result_mesh.vertices)), "faces": int(len(result_mesh.faces)),
@@ -181,8 +192,8 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
         messages.append(f"auto detail stops at {AUTO_MAX_CELLS} cells along the longest side "
                         f"({detail.voxel_size:.3g} units per cell); set Detail to Voxel Size for "
                         f"finer cells")
-    if udf_source == "network" and 0 < band.stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
-        messages.insert(0, f"the balls hold only {band.stats['mean_patch_points']:.1f} points on "
+    if udf_source == "network" and 0 < field_stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
+        messages.insert(0, f"the balls hold only {field_stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
     if stats["faces"] == 0:
         messages.append("the mesh is empty: try a larger radius or a lower resolution")

@@ -122,6 +122,9 @@ them, or ``auto``: drop them when they are at least ``AUTO_SHARE`` of the cloud 
 stretch the bounding box (``AUTO_SHRINK``), else keep them."""
 UDF_SOURCES = tuple(choice.value for choice in UDF_SOURCE_CHOICES)
 
+MIN_TILE_CELLS = 24
+"""Smallest tile side (cells): a tile's halo and the widest ball must stay a minor part of it."""
+
 DEFAULT_OUTLIER_RATIO = 2.5
 """Spacing over context median above which a point is an outlier (:mod:`.outliers`)."""
 
@@ -186,6 +189,13 @@ class ReconstructSettings:
         "keeps finer detail but takes longer and uses more memory",
         help="cell length in the input's units; giving it sets --detail voxel_size",
         implies=(("detail", "voxel_size"),), low=1e-9, high=1e9, soft_min=0.0001, soft_max=10.0, precision=4, subtype="DISTANCE")
+    tile_cells: int = setting(
+        0, "Tile Size",
+        "Cells per side of the tiles a large grid is made in, one after the other (0: tiles "
+        "of 256 cells when the grid is larger than 512 cells). Memory follows the tile size",
+        help="cells per side of a tile; 0: tiles of 256 cells when the grid has more than 512 "
+             "cells along its longest side, else one grid",
+        low=0, high=4096, soft_max=1024)
     device: str = setting(
         "auto", "Device", "Where the neural network runs",
         help="where the networks run: auto (CUDA when PyTorch sees a GPU), cpu or cuda",
@@ -226,6 +236,9 @@ class ReconstructSettings:
         for item in fields(self):
             _check_value(item.name, getattr(self, item.name), type(item.default),
                          setting_info(item))
+        if 0 < self.tile_cells < MIN_TILE_CELLS:
+            raise InputError(f"tile cells must be 0 (automatic) or at least {MIN_TILE_CELLS}, "
+                             f"not {self.tile_cells}")
         if self.rho_min > self.rho_max:
             raise InputError(f"need rho_min <= rho_max, got rho_min={self.rho_min}, "
                              f"rho_max={self.rho_max}")

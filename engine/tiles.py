@@ -1,0 +1,336 @@
+"""Large clouds in tiles: each tile's field and mesh on its own, stitched into one mesh.
+
+The field at a grid node depends only on the input points within reach of it (the widest ball,
+:data:`engine.field.SPARSE_WIDENING` times the largest radius), so a tile is computed from the
+points within its *core* (a cube of ``tile_cells`` cells) widened by a halo of
+:data:`HALO_CELLS` cells, where the mesher sees the surface run on, and by that reach. Each tile
+is meshed on its own; only the faces whose centroid lies in its core are kept (the cores tile
+the space without overlap, so no face is kept twice).
+
+Stitching. Along a border the two tiles' faces end within a fraction of a cell of each other:
+both meshed the same surface from the same points. Boundary vertices of different tiles that
+are each other's nearest within :data:`WELD_CELLS` cells are welded (to their midpoint); the
+slivers left between welded pairs are holes of a few edges, which are closed. A piece whose
+layer choice faces the other way from its neighbour across the border (the two sides of an open
+sheet are equally good) is turned over first, so the welded mesh keeps one orientation.
+
+Memory is bounded by the tile size, not the scene; time grows with the number of tiles that
+hold points.
+"""
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+
+AUTO_TILE_CELLS = 256
+"""With ``tile_cells`` 0, a grid of more than twice this many cells along a side is made in
+tiles of this many cells."""
+HALO_CELLS = 8
+"""Cells beyond a tile's core that it meshes too, so its core's faces see the surface go on."""
+SAME_CELLS = 0.1
+"""Boundary vertices of different tiles this close (cells) are one vertex meshed by both."""
+SEAM_HOLE_EDGES = 16
+"""Holes of up to this many edges left along a welded seam are closed."""
+WELD_CELLS = 0.9
+"""Other boundary vertices of neighbouring tiles that are each other's nearest within this
+many cells are welded too."""
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A cube of the grid: ``low <= x < high`` (working frame), numbered ``index`` per axis."""
+
+    index: Tuple[int, int, int]
+    low: np.ndarray
+    high: np.ndarray
+
+
+def plan_tiles(points: np.ndarray, spacing: float, tile_cells: int) -> List[Tile]:
+    """The tiles of ``tile_cells`` cells per side that hold at least one point, in C order.
+
+    The outermost tiles reach to infinity on their outer sides, so every point is in exactly
+    one core.
+    """
+    low = points.min(axis=0)
+    size = tile_cells * spacing
+    counts = np.maximum(np.ceil((points.max(axis=0) - low) / size - 1e-9).astype(np.int64), 1)
+    which = np.minimum(np.floor((points - low) / size).astype(np.int64), counts - 1)
+    used = np.unique(np.ravel_multi_index(which.T, counts))
+    tiles = []
+    for flat in used:
+        index = np.array(np.unravel_index(flat, counts))
+        tile_low = np.where(index == 0, -np.inf, low + index * size)
+        tile_high = np.where(index == counts - 1, np.inf, low + (index + 1) * size)
+        tiles.append(Tile(tuple(int(i) for i in index), tile_low, tile_high))
+    return tiles
+
+
+def tile_points(points: np.ndarray, tile: Tile, reach: float) -> np.ndarray:
+    """Indices of the points within ``reach`` of the tile's core box (per axis)."""
+    inside = np.all((points >= tile.low - reach) & (points < tile.high + reach), axis=1)
+    return np.flatnonzero(inside)
+
+
+def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
+    """The faces whose centroid lies in the tile's core, with only the vertices they use."""
+    if not len(faces):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    centroids = vertices[faces].mean(axis=1)
+    faces = faces[np.all((centroids >= tile.low) & (centroids < tile.high), axis=1)]
+    used, faces = np.unique(faces, return_inverse=True)
+    return vertices[used], faces.reshape(-1, 3)
+
+
+def stitch(pieces, spacing: float):
+    """One mesh from the tiles' kept faces: ``pieces`` is a list of ``(vertices, faces)``.
+
+    Returns
+    -------
+    vertices : (n, 3) float64; faces : (m, 3) int64
+    stats : dict with ``welded`` vertex pairs, ``flipped`` pieces, ``holes_closed``
+    """
+    from scipy.spatial import cKDTree
+
+    from .meshing.layers import close_pinholes
+    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
+
+    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
+    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
+    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
+                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
+    stats = {"welded": 0, "flipped": 0, "holes_closed": 0}
+    if not len(faces):
+        return vertices, faces, stats
+    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
+
+    topo = edge_topology(faces)
+    rim = np.unique(topo.edges[topo.counts == 1])
+    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
+    a, b = rim[a], rim[b]
+    if len(a):
+        count, piece = vertex_components(len(vertices), faces)
+        faces, stats["flipped"] = _agree_orientation(vertices, faces, piece, count, a, b)
+        vertices, merged = _weld(vertices, a, b)
+        faces = merged[faces]
+        faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+                      & (faces[:, 0] != faces[:, 2])]
+        # a face both tiles kept once its corners are welded: keep it once
+        faces = faces[np.sort(np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1])]
+        stats["welded"] = int(len(vertices) - len(np.unique(merged)))
+        faces, stats["holes_closed"] = close_pinholes(faces, SEAM_HOLE_EDGES)
+    return vertices, faces, stats
+
+
+def _pairs_across(points: np.ndarray, tile_of: np.ndarray, spacing: float):
+    """Pairs ``(i, j)`` of boundary vertices of different tiles to weld: every pair closer
+    than :data:`SAME_CELLS` cells (the same vertex, meshed by both tiles), then, among the
+    vertices left, each other's nearest of another tile within :data:`WELD_CELLS` cells."""
+    from scipy.spatial import cKDTree
+
+    if len(points) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    same = cKDTree(points).query_pairs(SAME_CELLS * spacing, output_type="ndarray")
+    same = same[tile_of[same[:, 0]] != tile_of[same[:, 1]]]
+    left = np.setdiff1d(np.arange(len(points)), same.reshape(-1))
+    i, j = _mutual_nearest_across(points[left], tile_of[left], WELD_CELLS * spacing)
+    return (np.concatenate([same[:, 0], left[i]]).astype(np.int64),
+            np.concatenate([same[:, 1], left[j]]).astype(np.int64))
+
+
+def _weld(vertices: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """Merge the vertices joined by pairs ``(a, b)``, each group at its mean position.
+
+    Returns the new vertices and, per old vertex, the index of the vertex it became (the
+    group's smallest index; unused vertices are left in place).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(vertices)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    _, group = connected_components(graph, directed=False)
+    first = np.full(group.max() + 1, n, dtype=np.int64)
+    np.minimum.at(first, group, np.arange(n))
+    merged = first[group]
+    sums = np.zeros_like(vertices)
+    np.add.at(sums, merged, vertices)
+    size = np.bincount(merged, minlength=n)
+    welded = vertices.copy()
+    grouped = size > 1
+    welded[grouped] = sums[grouped] / size[grouped, None]
+    return welded, merged
+
+
+def _mutual_nearest_across(points: np.ndarray, tile_of: np.ndarray, reach: float):
+    """Pairs ``(i, j)``, ``i < j``, of points of different tiles that are each other's nearest
+    point of another tile, closer than ``reach``."""
+    from scipy.spatial import cKDTree
+
+    if len(points) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    tree = cKDTree(points)
+    k = min(8, len(points))
+    distance, near = tree.query(points, k=k, distance_upper_bound=reach)
+    distance = np.atleast_2d(distance)
+    near = np.atleast_2d(near)
+    valid = np.isfinite(distance)
+    other = valid & (tile_of[np.minimum(near, len(points) - 1)] != tile_of[:, None])
+    first = np.where(other.any(axis=1), np.argmax(other, axis=1), -1)
+    has = first >= 0
+    best = np.full(len(points), -1)
+    best[has] = near[np.flatnonzero(has), first[has]]
+    i = np.flatnonzero(has)
+    j = best[i]
+    mutual = best[j] == i
+    i, j = i[mutual], j[mutual]
+    keep = i < j
+    return i[keep], j[keep]
+
+
+def _agree_orientation(vertices, faces, piece, count, a, b):
+    """Turn over the pieces whose faces at welded pairs face against their neighbours'.
+
+    Each welded pair votes (its two vertices' mean normals agree or not) between the two
+    pieces it joins; a spanning forest over the pieces, strongest votes first, fixes each
+    piece's parity. Returns the faces (some rows reversed) and how many pieces were turned.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
+
+    from .meshing.mesh_ops import face_normals
+
+    normals, areas = face_normals(vertices, faces)
+    weighted = normals * areas[:, None]
+    vertex_normal = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(vertex_normal, faces[:, k], weighted)
+    agree = np.einsum("ij,ij->i", vertex_normal[a], vertex_normal[b])
+    pa, pb = piece[a], piece[b]
+    between = pa != pb
+    pa, pb, agree = pa[between], pb[between], agree[between]
+    if not len(pa):
+        return faces, 0
+    lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
+    key = lo * count + hi
+    keys, inverse = np.unique(key, return_inverse=True)
+    vote = np.bincount(inverse, weights=np.sign(agree), minlength=len(keys))
+    strength = np.bincount(inverse, weights=np.abs(agree), minlength=len(keys))
+    u, v = keys // count, keys % count
+    # strongest evidence first: a minimum spanning forest over negative strengths
+    graph = coo_matrix((-(strength + 1e-12), (u, v)), shape=(count, count)).tocsr()
+    forest = minimum_spanning_tree(graph).tocoo()
+    sign = dict(zip(zip(u.tolist(), v.tolist()), np.sign(vote).tolist()))
+    adjacency = {}
+    for x, y in zip(forest.row.tolist(), forest.col.tolist()):
+        s = sign.get((min(x, y), max(x, y)), 1.0)
+        adjacency.setdefault(x, []).append((y, s))
+        adjacency.setdefault(y, []).append((x, s))
+    flip = np.zeros(count, bool)
+    seen = np.zeros(count, bool)
+    for root in sorted(adjacency):
+        if seen[root]:
+            continue
+        seen[root] = True
+        stack = [root]
+        while stack:
+            node = stack.pop()
+            for other, s in adjacency[node]:
+                if not seen[other]:
+                    seen[other] = True
+                    flip[other] = flip[node] ^ (s < 0)
+                    stack.append(other)
+    turned = flip[piece[faces[:, 0]]]
+    faces = faces.copy()
+    faces[turned] = faces[turned][:, ::-1]
+    return faces, int(flip.sum())
+
+
+def tile_size(detail, settings) -> int:
+    """Cells per tile side for a reconstruction, 0 for one grid without tiles."""
+    if settings.tile_cells:
+        return int(settings.tile_cells)
+    return AUTO_TILE_CELLS if detail.cells > 2 * AUTO_TILE_CELLS else 0
+
+
+def tile_reach(settings, spacing: float) -> float:
+    """How far beyond a tile's core its points must reach: the mesher's halo plus the widest
+    ball any node of the halo may read (a sparse ball widened to its last factor)."""
+    from .field import MIN_BAND_NODES, SPARSE_WIDENING
+    from .radius import max_radius
+
+    ball = max(max_radius(settings), MIN_BAND_NODES * spacing)
+    return HALO_CELLS * spacing + SPARSE_WIDENING[-1] * ball + spacing
+
+
+def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, meshing,
+              udf_source: str, progress: Optional[ProgressFn] = None,
+              cancel: Optional[CancelFn] = None):
+    """The field and mesh of one tile from its points (working frame); the faces of its core.
+
+    Returns ``(vertices, faces, stats)``: the kept faces and the field's and mesher's numbers.
+    """
+    from .field import compute_udf_band
+    from .meshing import extract_surface
+
+    progress = progress or no_progress
+    halo = HALO_CELLS / settings.resolution
+    band = compute_udf_band(points, settings, sub_progress(progress, 0.0, 0.6), cancel,
+                            udf_source=udf_source, anchor=anchor,
+                            bounds=(tile.low - halo, tile.high + halo))
+    meshed = extract_surface(band.grid, meshing, sub_progress(progress, 0.6, 1.0), cancel)
+    vertices, faces = keep_core(np.asarray(meshed.mesh.vertices, np.float64),
+                                np.asarray(meshed.mesh.faces, np.int64), tile)
+    return vertices, faces, band.stats
+
+
+def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
+                  udf_source: str = "network", progress: Optional[ProgressFn] = None,
+                  cancel: Optional[CancelFn] = None):
+    """One mesh of a cloud (working frame) made tile by tile (see the module docstring).
+
+    Returns
+    -------
+    vertices : (n, 3) float64; faces : (m, 3) int64
+    field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
+        ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``
+    mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``holes_closed``)
+        and the clean-up's
+    """
+    from .meshing.cleanup import clean_mesh
+
+    progress = progress or no_progress
+    spacing = 1.0 / settings.resolution
+    tiles = plan_tiles(points, spacing, tile_cells)
+    anchor = points.min(axis=0)
+    reach = tile_reach(settings, spacing)
+    pieces = []
+    sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
+    patch_points = 0.0
+    for number, tile in enumerate(tiles):
+        check_cancel(cancel)
+        chosen = tile_points(points, tile, reach)
+        part = sub_progress(progress, 0.95 * number / len(tiles),
+                            0.95 * (number + 1) / len(tiles))
+        part(0.0, f"tile {number + 1} of {len(tiles)}")
+        vertices, faces, band = mesh_tile(points[chosen], tile, anchor, settings, meshing,
+                                          udf_source, part, cancel)
+        pieces.append((vertices, faces))
+        for key in sums:
+            sums[key] += int(band.get(key, 0))
+        seen = band.get("network_queries", 0) - band["sparse_balls"]
+        patch_points += band["mean_patch_points"] * seen
+        device = band["device"]
+    progress(0.95, f"stitching {len(tiles)} tiles")
+    vertices, faces, stitched = stitch(pieces, spacing)
+    vertices, faces, counts = clean_mesh(vertices, faces, spacing, meshing.min_component_faces)
+    seen = sums["network_queries"] - sums["sparse_balls"]
+    field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
+                   "mean_patch_points": patch_points / max(seen, 1), "device": device,
+                   "udf_source": udf_source}
+    mesh_stats = {**stitched, **{f"cleanup_{k}": v for k, v in counts.items()}}
+    progress(1.0, "tiles stitched")
+    return vertices, faces.astype(np.int64), field_stats, mesh_stats

@@ -1,0 +1,101 @@
+"""Tiled reconstruction: a cloud forced through small tiles comes out as it does in one grid."""
+
+import numpy as np
+import pytest
+
+from engine.meshing.mesh_ops import edge_topology, vertex_components
+from engine.reconstruct import reconstruct
+from engine.tiles import plan_tiles
+
+RESOLUTION = 64
+TILE = 24
+
+
+def hemisphere_cloud(count: int, seed: int = 0) -> np.ndarray:
+    """Points on the upper half of a sphere of radius 0.5: an open surface with one rim."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(count, 3))
+    v[:, 2] = np.abs(v[:, 2])
+    return 0.5 * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def surface_error(vertices: np.ndarray) -> np.ndarray:
+    """Distance of mesh vertices to the true hemisphere (radius 0.5, z >= 0)."""
+    r = np.linalg.norm(vertices, axis=1)
+    on_sphere = np.abs(r - 0.5)
+    below = vertices[:, 2] < 0  # past the rim: distance to the rim circle
+    rho = np.linalg.norm(vertices[:, :2], axis=1)
+    rim = np.hypot(rho - 0.5, vertices[:, 2])
+    return np.where(below, rim, on_sphere)
+
+
+def border_distance(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (cells) of each vertex to the nearest inner tile border plane."""
+    spacing = 1.0 / RESOLUTION
+    extent = points.max(axis=0) - points.min(axis=0)
+    unit = 1.0 / extent.max()  # the working frame of this cloud is the unit frame
+    low = points.min(axis=0)
+    size = TILE * spacing / unit
+    counts = np.ceil((points.max(axis=0) - low) / size - 1e-9)
+    r = (vertices - low) / size
+    nearest = np.clip(np.round(r), 1, np.maximum(counts - 1, 1))
+    gap = np.abs(r - nearest) * TILE
+    gap[:, counts < 2] = np.inf
+    return gap.min(axis=1)
+
+
+@pytest.fixture(scope="module")
+def meshes():
+    cloud = hemisphere_cloud(20_000)
+    settings = dict(detail="resolution", resolution=RESOLUTION, seed=0)
+    whole = reconstruct(cloud, settings)
+    tiled = reconstruct(cloud, dict(settings, tile_cells=TILE))
+    return cloud, whole, tiled
+
+
+def test_the_cloud_is_cut_into_several_tiles(meshes):
+    cloud, whole, tiled = meshes
+    assert "tiles" not in whole.stats
+    assert tiled.stats["tiles"] == len(plan_tiles(cloud / np.ptp(cloud, axis=0).max(),
+                                                  1.0 / RESOLUTION, TILE)) >= 8
+
+
+def test_tiles_match_one_grid(meshes):
+    cloud, whole, tiled = meshes
+    error_whole = surface_error(whole.mesh.vertices).mean()
+    error_tiled = surface_error(tiled.mesh.vertices).mean()
+    assert error_tiled < 1.02 * error_whole + 1e-5
+    area = [np.linalg.norm(np.cross(m.vertices[m.faces[:, 1]] - m.vertices[m.faces[:, 0]],
+                                    m.vertices[m.faces[:, 2]] - m.vertices[m.faces[:, 0]]),
+                           axis=1).sum() / 2 for m in (whole.mesh, tiled.mesh)]
+    assert abs(area[1] / area[0] - 1) < 0.01  # no face kept twice, no gap
+    assert vertex_components(len(tiled.mesh.vertices), tiled.mesh.faces)[0] == 1
+
+
+def test_no_seams_along_tile_borders(meshes):
+    cloud, whole, tiled = meshes
+    for result in (whole, tiled):
+        topo = edge_topology(result.mesh.faces)
+        result.rim_edges = topo.edges[topo.counts == 1]
+        result.nonmanifold = topo.edges[topo.counts > 2]
+    spacing = 0.5 * 2 / RESOLUTION  # the cloud spans 1 unit: one cell in its units
+
+    def away_from_rim(mesh, edges):
+        middle = mesh.vertices[edges].mean(axis=1)
+        return middle[middle[:, 2] > 2 * spacing]
+
+    # the only true boundary is the rim at z = 0; along the borders the seams are welded, up
+    # to a few slits (8 boundary edges of about 800 welded vertices here)
+    assert len(away_from_rim(tiled.mesh, tiled.rim_edges)) <= len(
+        away_from_rim(whole.mesh, whole.rim_edges)) + 10
+    assert len(tiled.nonmanifold) <= len(whole.nonmanifold) + 6
+    assert tiled.stats["meshing"]["welded"] > 500
+
+
+def test_the_surface_near_borders_is_as_good_as_away_from_them(meshes):
+    cloud, _, tiled = meshes
+    vertices = tiled.mesh.vertices
+    near = border_distance(vertices, cloud) < 1.0
+    assert near.sum() > 200 and (~near).sum() > 200
+    within = surface_error(vertices) < 0.25 / RESOLUTION
+    assert within[near].mean() > 0.98 * within[~near].mean()
