@@ -196,6 +196,20 @@ class ReconstructSettings:
         help="cells per side of a tile; 0: tiles of 256 cells when the grid has more than 512 "
              "cells along its longest side, else one grid",
         low=0, high=4096, soft_max=1024)
+    workers: int = setting(
+        0, "Workers",
+        "Processes that make tiles side by side (0: one per CPU core). The mesh is the same "
+        "for any number",
+        help="worker processes for the tiles, 0: one per CPU core; the mesh is the same, bit "
+             "for bit, for any number",
+        low=0, high=1024, soft_max=64)
+    scheduler: str = setting(
+        "", "Dask Scheduler",
+        "Run the tiles on a Dask cluster: 'local' for one on this computer, or a scheduler's "
+        "address (needs Dask)",
+        help="run the tiles on Dask: 'local' starts a local cluster of --workers processes, "
+             "else a scheduler address such as tcp://host:8786 (needs pip install "
+             "\"dask[distributed]\"); empty: no Dask")
     device: str = setting(
         "auto", "Device", "Where the neural network runs",
         help="where the networks run: auto (CUDA when PyTorch sees a GPU), cpu or cuda",

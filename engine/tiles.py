@@ -301,23 +301,24 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         and the clean-up's
     """
     from .meshing.cleanup import clean_mesh
+    from .tile_runners import available_cores
+
+    from .tile_runners import run_tiles
 
     progress = progress or no_progress
     spacing = 1.0 / settings.resolution
     tiles = plan_tiles(points, spacing, tile_cells)
     anchor = points.min(axis=0)
     reach = tile_reach(settings, spacing)
+    jobs = [(points[tile_points(points, tile, reach)], tile, anchor, settings, meshing,
+             udf_source) for tile in tiles]
+    results = run_tiles(mesh_tile, jobs, settings.workers, settings.scheduler,
+                        sub_progress(progress, 0.0, 0.95), cancel)
     pieces = []
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
     patch_points = 0.0
-    for number, tile in enumerate(tiles):
-        check_cancel(cancel)
-        chosen = tile_points(points, tile, reach)
-        part = sub_progress(progress, 0.95 * number / len(tiles),
-                            0.95 * (number + 1) / len(tiles))
-        part(0.0, f"tile {number + 1} of {len(tiles)}")
-        vertices, faces, band = mesh_tile(points[chosen], tile, anchor, settings, meshing,
-                                          udf_source, part, cancel)
+    device = "none"
+    for vertices, faces, band in results:
         pieces.append((vertices, faces))
         for key in sums:
             sums[key] += int(band.get(key, 0))
@@ -329,6 +330,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     vertices, faces, counts = clean_mesh(vertices, faces, spacing, meshing.min_component_faces)
     seen = sums["network_queries"] - sums["sparse_balls"]
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
+                   "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
                    "udf_source": udf_source}
     mesh_stats = {**stitched, **{f"cleanup_{k}": v for k, v in counts.items()}}

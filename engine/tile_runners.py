@@ -1,0 +1,129 @@
+"""Where the tiles of a reconstruction run: in this process, in worker processes, or on a Dask
+cluster. Each tile is computed the same way wherever it runs, so the mesh is the same, bit for
+bit, for any number of workers.
+
+Worker processes are started fresh (``spawn``: no state inherited from the caller, safe with
+threads) and each runs its tiles on one thread, so ``workers`` processes use ``workers`` cores.
+Dask (``pip install "dask[distributed]"``) is optional: ``scheduler="local"`` starts a local
+cluster of ``workers`` processes, any other value is the address of a running scheduler
+(``tcp://host:8786``).
+
+Inside Blender (``bpy`` loaded) a fresh worker process cannot import the extension, so there the
+tiles run in Blender's own process, one after the other (the network still uses every core
+through its threads).
+"""
+
+import os
+import sys
+import time
+from typing import Callable, List, Optional, Sequence
+
+from .errors import Cancelled, InputError
+from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+
+POLL_SECONDS = 0.2
+"""How often a waiting run checks for a cancel."""
+
+
+def available_cores() -> int:
+    """CPU cores this process may use."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:
+        return max(os.cpu_count() or 1, 1)
+
+
+def run_tiles(task: Callable, jobs: Sequence[tuple], workers: int = 1, scheduler: str = "",
+              progress: Optional[ProgressFn] = None,
+              cancel: Optional[CancelFn] = None) -> List:
+    """``[task(*job) for job in jobs]``, in order, run as asked.
+
+    task : a module-level function (it is sent to other processes); in this process it also
+        gets ``progress=`` and ``cancel=`` keywords.
+    workers : processes (0: every core); with one, the tiles run in this process.
+    scheduler : ``""`` (no Dask), ``"local"`` or a Dask scheduler's address.
+    progress : called with the share of tiles done.
+    cancel : polled while waiting; on a cancel the workers are stopped and :class:`Cancelled`
+        raised.
+    """
+    progress = progress or no_progress
+    workers = workers or available_cores()
+    if scheduler:
+        return _on_dask(task, jobs, workers, scheduler, progress, cancel)
+    if workers <= 1 or len(jobs) <= 1 or "bpy" in sys.modules:
+        results = []
+        for number, job in enumerate(jobs):
+            check_cancel(cancel)
+            part = sub_progress(progress, number / len(jobs), (number + 1) / len(jobs))
+            part(0.0, f"tile {number + 1} of {len(jobs)}")
+            results.append(task(*job, progress=part, cancel=cancel))
+        return results
+    return _in_processes(task, jobs, min(workers, len(jobs)), progress, cancel)
+
+
+def _one_thread() -> None:
+    """Worker start-up: one thread per worker process (the workers fill the cores)."""
+    os.environ["OMP_NUM_THREADS"] = "1"
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1)
+
+
+def _in_processes(task, jobs, workers, progress, cancel) -> List:
+    import multiprocessing
+
+    pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_one_thread)
+    try:
+        pending = [pool.apply_async(task, job) for job in jobs]
+        done = 0
+        while done < len(pending):
+            check_cancel(cancel)
+            pending[done].wait(POLL_SECONDS)
+            while done < len(pending) and pending[done].ready():
+                done += 1
+                progress(done / len(pending), f"{done} of {len(pending)} tiles done "
+                                              f"on {workers} workers")
+        results = [item.get() for item in pending]
+        pool.close()
+        return results
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+def _on_dask(task, jobs, workers, scheduler, progress, cancel) -> List:
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError("running tiles on Dask needs Dask: pip install \"dask[distributed]\"; "
+                         "or run without a scheduler") from None
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as error:
+            raise InputError(f"could not reach the Dask scheduler at {scheduler}: "
+                             f"{error}") from None
+    try:
+        client.run(_one_thread)
+        futures = [client.submit(task, *job, pure=False) for job in jobs]
+        while True:
+            if cancel is not None and cancel():
+                client.cancel(futures)
+                raise Cancelled("cancelled by the user")
+            finished = sum(future.done() for future in futures)
+            progress(finished / len(futures), f"{finished} of {len(futures)} tiles done on Dask")
+            if finished == len(futures):
+                break
+            time.sleep(POLL_SECONDS)
+        return client.gather(futures)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
