@@ -23,6 +23,8 @@ from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progr
 
 POLL_SECONDS = 0.2
 """How often a waiting run checks for a cancel."""
+CONNECT_SECONDS = 10
+"""How long to try reaching a Dask scheduler before saying it cannot be reached."""
 
 
 def available_cores() -> int:
@@ -106,7 +108,7 @@ def _on_dask(task, jobs, workers, scheduler, progress, cancel) -> List:
         client = Client(cluster)
     else:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout=f"{CONNECT_SECONDS}s")
         except (OSError, TimeoutError) as error:
             raise InputError(f"could not reach the Dask scheduler at {scheduler}: "
                              f"{error}") from None

@@ -99,3 +99,36 @@ def test_the_surface_near_borders_is_as_good_as_away_from_them(meshes):
     assert near.sum() > 200 and (~near).sum() > 200
     within = surface_error(vertices) < 0.25 / RESOLUTION
     assert within[near].mean() > 0.98 * within[~near].mean()
+
+
+@pytest.fixture(scope="module")
+def small_tiled():
+    cloud = hemisphere_cloud(8_000, seed=2)
+    settings = dict(detail="resolution", resolution=48, tile_cells=24, seed=0)
+    return cloud, settings, reconstruct(cloud, dict(settings, workers=1))
+
+
+def test_two_workers_give_the_same_mesh_bit_for_bit(small_tiled):
+    cloud, settings, one = small_tiled
+    two = reconstruct(cloud, dict(settings, workers=2))
+    assert one.stats["tiles"] >= 4 and two.stats["workers"] == 2
+    assert np.array_equal(one.mesh.vertices, two.mesh.vertices)
+    assert np.array_equal(one.mesh.faces, two.mesh.faces)
+
+
+def test_a_local_dask_cluster_gives_the_same_mesh(small_tiled):
+    pytest.importorskip("distributed", reason="Dask is optional: pip install dask[distributed]")
+    cloud, settings, one = small_tiled
+    dask = reconstruct(cloud, dict(settings, workers=2, scheduler="local"))
+    assert np.array_equal(one.mesh.vertices, dask.mesh.vertices)
+    assert np.array_equal(one.mesh.faces, dask.mesh.faces)
+
+
+def test_an_unreachable_scheduler_is_a_clear_error():
+    pytest.importorskip("distributed", reason="Dask is optional: pip install dask[distributed]")
+    from engine.errors import InputError
+
+    cloud = hemisphere_cloud(4_000)
+    with pytest.raises(InputError, match="could not reach the Dask scheduler"):
+        reconstruct(cloud, dict(detail="resolution", resolution=32, tile_cells=24,
+                                scheduler="tcp://127.0.0.1:9"))
