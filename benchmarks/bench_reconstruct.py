@@ -67,8 +67,8 @@ def _macs_per_query(points: float) -> int:
 def run_poisson(path: str) -> dict:
     """Open3D screened Poisson (depth 9, the Table I baseline) once in this process."""
     sys.path.insert(0, str(ROOT))
-    from engine.bench.methods import make_poisson
     from engine.io import read_point_cloud
+    from lab.bench.methods import make_poisson
 
     cloud = read_point_cloud(path)
     start = time.perf_counter()

@@ -1,40 +1,25 @@
 """Command-line interface: ``python -m engine COMMAND ...`` from the repository root.
 
 Each command lives in ``engine/commands/<name>.py`` with ``add_arguments(parser)`` and
-``run(args) -> int``; modules are imported only when their command runs (torch stays lazy).
+``run(args) -> int``; a command's heavy modules are imported only when it runs (torch stays lazy).
 """
 
-import argparse
 import importlib
 import sys
 
-from .errors import Cancelled, InputError
+from .commands import run_cli
 
 COMMANDS = {
     "reconstruct": ("reconstruct", "Reconstruct a mesh from a point-cloud file."),
     "mesh-udf": ("mesh_udf", "Mesh an unsigned distance grid (.npz with udf, origin, spacing)."),
     "metrics": ("metrics", "Compare a predicted mesh with a ground-truth mesh (prints JSON)."),
-    "bench": ("bench", "Run a reconstruction method over benchmark shapes; print a table."),
 }
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m engine", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    modules = {}
-    for name, (module_name, help_text) in COMMANDS.items():
-        module = importlib.import_module(f".commands.{module_name}", __package__)
-        modules[name] = module
-        module.add_arguments(sub.add_parser(name, help=help_text, description=help_text))
-    args = parser.parse_args(argv)
-    try:
-        return int(modules[args.command].run(args) or 0)
-    except InputError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    except Cancelled:
-        print("cancelled", file=sys.stderr)
-        return 130
+    commands = {name: (importlib.import_module(f".commands.{module}", __package__), help_text)
+                for name, (module, help_text) in COMMANDS.items()}
+    return run_cli("python -m engine", __doc__.splitlines()[0], commands, argv)
 
 
 if __name__ == "__main__":

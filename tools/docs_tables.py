@@ -5,11 +5,11 @@
 
 A generated table sits between two comments that say which commands print it:
 
-    <!-- generated from: python -m engine bench --method ground-truth --report --out R -->
+    <!-- generated from: python -m lab bench --method ground-truth --report --out R -->
     ...
     <!-- end of generated table -->
 
-Each command is a ``python -m engine`` command line that reads JSON only (``--report``), run
+Each command is a ``python -m lab`` command line that reads JSON only (``--report``), run
 here in this process; several commands are joined with `` ; `` and their tables merged into
 one (rows of the same header). Nothing but the JSON files feeds a table, so running this twice
 changes nothing, and the docs cannot drift from the data without ``--check`` failing.
@@ -27,16 +27,16 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 REGION = re.compile(r"(<!-- generated from: (?P<commands>.+?) -->\n)(?P<body>.*?)"
                     r"(<!-- end of generated table -->)", re.S)
-PREFIX = ["python", "-m", "engine"]
+PREFIX = ["python", "-m", "lab"]
 
 
-def run_engine(command: str) -> str:
-    """The standard output of one ``python -m engine ...`` command, run in this process."""
+def run_lab(command: str) -> str:
+    """The standard output of one ``python -m lab ...`` command, run in this process."""
     words = shlex.split(command)
     if words[:3] != PREFIX:
-        raise ValueError(f"not a 'python -m engine' command: {command}")
+        raise ValueError(f"not a 'python -m lab' command: {command}")
     sys.path.insert(0, str(ROOT))
-    from engine.__main__ import main
+    from lab.__main__ import main
 
     printed = io.StringIO()
     with contextlib.chdir(ROOT), contextlib.redirect_stdout(printed), \
@@ -61,7 +61,7 @@ def merged(outputs) -> str:
 def regenerate(text: str) -> str:
     """``text`` with every generated region's body replaced by its commands' output."""
     def body(match):
-        outputs = [run_engine(command.strip()) for command in match["commands"].split(" ; ")]
+        outputs = [run_lab(command.strip()) for command in match["commands"].split(" ; ")]
         return match.group(1) + "\n" + merged(outputs) + "\n" + match.group(4)
 
     return REGION.sub(body, text)

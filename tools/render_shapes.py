@@ -13,8 +13,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from engine.bench.dataset import DOMAINS, make_input, make_shape, test_seeds  # noqa: E402
 from engine.sampling import face_areas_and_normals  # noqa: E402
+from lab.bench.dataset import DOMAINS, make_input, make_shape, test_seeds  # noqa: E402
 
 COLUMNS = 4
 ROWS = len(DOMAINS) + 1  # one row per domain, then scanned room clouds

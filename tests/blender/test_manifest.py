@@ -36,7 +36,7 @@ def test_manifest_fields_follow_the_extension_platform_rules():
     assert "wheels" not in manifest, "tools/build_extension.py adds the wheels per platform"
     excluded = manifest["build"]["paths_exclude_pattern"]
     assert {"__pycache__/", ".*", "/*.zip", "*.blend[1-9]", "/tests/",
-            "/engine/training/"} <= set(excluded)
+            "/lab/"} <= set(excluded)
     assert "GNU GENERAL PUBLIC LICENSE" in (ROOT / "LICENSE").read_text()[:200]
 
 
@@ -55,7 +55,7 @@ def test_built_zip_ships_only_the_extension_and_installs(extension, tmp_path):
     assert {"blender_manifest.toml", "__init__.py", "LICENSE", "operators/bridge.py",
             "engine/reconstruct.py", "scripts/batch_reconstruct.py"} <= set(names)
     assert not [n for n in names if n.startswith(("tests/", "docs/", "tools/", ".",
-                                                  "engine/training/", "bench_results/",
+                                                  "lab/", "bench_results/",
                                                   "examples/", "benchmarks/"))
                 or "__pycache__" in n or "/." in n]
 

@@ -135,7 +135,7 @@ def test_budget():
 
 def test_shipped_weights_beat_the_nearest_point_distance():
     """The shipped backbone on fresh synthetic patches (seed unseen in training)."""
-    from engine.training import patch_data as pd
+    from lab.training import patch_data as pd
     data = pd.generate_patches(2000, np.random.default_rng(424242))
     net = bb.load_backbone_numpy()
     pred = net.predict(data["rel"], data["mask"])

@@ -38,7 +38,7 @@ def test_a_table_that_drifted_from_its_json_is_found_and_rewritten(tmp_path):
 def test_a_table_whose_results_are_missing_is_an_error(tmp_path):
     generator = _generator()
     page = tmp_path / "page.md"
-    page.write_text("<!-- generated from: python -m engine bench --table --report --domain all "
+    page.write_text("<!-- generated from: python -m lab bench --table --report --domain all "
                     "--condition clean --count 30 --out bench_results/no_such_folder -->\n"
                     "<!-- end of generated table -->\n")
     with pytest.raises(RuntimeError, match="did not find all of its results"):

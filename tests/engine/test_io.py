@@ -5,11 +5,11 @@ import time
 import numpy as np
 import pytest
 
-from engine.bench.dataset import shared_dir
 from engine.errors import InputError
 from engine.frame import validate_points
 from engine.geometry import Mesh
 from engine.io import read_mesh, read_point_cloud, write_mesh
+from lab.bench.dataset import shared_dir
 
 REAL = os.path.join(shared_dir(), "data", "real")
 needs_real_data = pytest.mark.skipif(not os.path.isdir(REAL), reason="shared real data absent")

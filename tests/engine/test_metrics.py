@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from engine.__main__ import main
-from engine.bench.dataset import shared_dir
 from engine.errors import InputError
 from engine.geometry import Mesh
 from engine.metrics import chamfer_f_nc, evaluate
+from lab.bench.dataset import shared_dir
 
 KEYS = ("cd_l1_x100", "cd_l2", "f1_0.005", "f1_0.01", "nc")
 BUNNY = Path(shared_dir()) / "data" / "real" / "cgal" / "bunny00.off"

@@ -94,7 +94,7 @@ def test_strays_in_a_scanned_room_are_found():
     # so with a small context their own spacing set the median (69 % found with 64 points)
     from scipy.spatial import cKDTree
 
-    from engine.bench.dataset import make_input, make_shape, test_seeds
+    from lab.bench.dataset import make_input, make_shape, test_seeds
 
     seed = test_seeds("rooms", 1)[0]
     room = make_shape("rooms", seed)

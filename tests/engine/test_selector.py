@@ -154,8 +154,8 @@ def test_training_learns_a_radius_from_the_noise_features():
     The trainer (standardised features, head first) must give each kind its own radius."""
     import argparse
 
-    from engine.training.radius_targets import CANDIDATE_RADII
-    from engine.training.train_selector import train
+    from lab.training.radius_targets import CANDIDATE_RADII
+    from lab.training.train_selector import train
 
     rng = np.random.default_rng(0)
     count = 4096
@@ -180,8 +180,8 @@ def test_training_learns_a_radius_from_the_noise_features():
 
 
 def test_dense_training_scans_are_cached_apart_and_fill_the_parent_balls(tmp_path):
-    from engine.bench.dataset import train_seeds
-    from engine.training.selector_data import dense_conditions, shape_cache
+    from lab.bench.dataset import train_seeds
+    from lab.training.selector_data import dense_conditions, shape_cache
 
     def zeros(rel, mask):  # a stand-in backbone: the error curves are then |udf|
         return np.zeros(len(rel), dtype=np.float32)

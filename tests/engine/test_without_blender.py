@@ -1,6 +1,7 @@
 """The engine and its tests never need Blender: with ``import bpy`` made to fail, every engine
 module and the extension's root package (which pytest collects as the package of every test)
-still import, and importing the reconstruction pipeline loads neither bpy nor torch."""
+still import, importing the reconstruction pipeline loads neither bpy nor torch, and no engine
+module imports the unshipped ``lab`` package."""
 
 import subprocess
 import sys
@@ -16,6 +17,7 @@ import engine.reconstruct
 assert "torch" not in sys.modules, "importing the pipeline loaded torch"
 for info in pkgutil.walk_packages(engine.__path__, "engine."):
     importlib.import_module(info.name)
+assert not [m for m in sys.modules if m.split(".")[0] == "lab"], "the engine imports lab"
 spec = importlib.util.spec_from_file_location("udf_reconstruction", "__init__.py",
                                               submodule_search_locations=["."])
 root = importlib.util.module_from_spec(spec)

@@ -27,7 +27,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..patches import MAX_POINTS
+from engine.patches import MAX_POINTS
 
 FAMILIES = ("plane", "cylinder", "quadric", "boundary", "crease", "cusp", "corner", "saddle",
             "two_sheets")

@@ -1,6 +1,6 @@
 """Train the radius selector against the frozen backbone and export ``engine/weights/selector.npz``.
 
-    python -m engine.training.train_selector --out engine/weights/selector.npz --seed 0
+    python -m lab.training.train_selector --out engine/weights/selector.npz --seed 0
         [--shapes 40] [--dense-shapes 10] [--queries 3000] [--epochs 10] [--head-epochs 5]
         [--cache-dir out/selector_cache]
 
@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..backbone import DEFAULT_WEIGHTS
+from engine.backbone import DEFAULT_WEIGHTS
+from engine.curvature import curvature_radii
+from engine.field import backbone_predictor
+from engine.selector import NumpySelector, build_selector_torch, predict_radii
+from engine.weights_file import save_weights
 from ..bench.dataset import train_seeds
-from ..curvature import curvature_radii
-from ..field import backbone_predictor
-from ..selector import NumpySelector, build_selector_torch, predict_radii
-from ..weights_file import save_weights
 from .radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets, loss_weights,
                              parabola_targets)
 from .selector_data import (DENSE_POINTS, TRAINING_CONDITIONS, backbone_udf, condition_of,

@@ -15,8 +15,8 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from ..geometry import Mesh
-from ..sampling import face_areas_and_normals, sample_surface
+from engine.geometry import Mesh
+from engine.sampling import face_areas_and_normals, sample_surface
 
 ROWS = 512  # depth-map height; the width is 2 * ROWS (square pixels of pi / ROWS radians)
 SPLATS = 200_000  # surface samples splatted into each depth map

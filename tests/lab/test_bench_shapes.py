@@ -9,13 +9,13 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from engine.bench import dataset
-from engine.bench.dataset import (CONDITIONS, DOMAINS, crop_to_input, make_input, make_shape,
-                                  room_viewpoints, train_seeds)
-from engine.bench.dataset import test_seeds as held_out_seeds
-from engine.bench.scan import virtual_scan
-from engine.bench.shapes.rooms import room_layout
 from engine.sampling import face_areas_and_normals
+from lab.bench import dataset
+from lab.bench.dataset import (CONDITIONS, DOMAINS, crop_to_input, make_input, make_shape,
+                               room_viewpoints, train_seeds)
+from lab.bench.dataset import test_seeds as held_out_seeds
+from lab.bench.scan import virtual_scan
+from lab.bench.shapes.rooms import room_layout
 
 
 def _edges(faces):

@@ -1,6 +1,6 @@
 """Train the backbone on synthetic patches and export ``engine/weights/backbone.npz``.
 
-    python -m engine.training.train_backbone --out engine/weights/backbone.npz --steps N --seed 0
+    python -m lab.training.train_backbone --out engine/weights/backbone.npz --steps N --seed 0
         [--resume CKPT] [--device cpu|cuda] [--run-dir out/backbone] ...
 
 Data: a pool of ``pool_chunks`` chunks of ``chunk`` patches from :mod:`patch_data`. Chunk k is
@@ -28,7 +28,7 @@ from typing import Dict
 
 import numpy as np
 
-from .. import backbone as bb
+from engine import backbone as bb
 from . import patch_data as pd
 
 
@@ -120,7 +120,7 @@ def main(argv=None):
     run_dir = Path(args.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     log = Logger(run_dir / "train.log")
-    log("command: python -m engine.training.train_backbone " + " ".join(sys.argv[1:] if argv is None else argv))
+    log("command: python -m lab.training.train_backbone " + " ".join(sys.argv[1:] if argv is None else argv))
 
     device = torch.device(args.device)
     model = bb.build_backbone_torch(bb.DEFAULT_CONFIG).to(device)

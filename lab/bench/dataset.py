@@ -12,9 +12,9 @@ from typing import Dict, List, Tuple, Union
 
 import numpy as np
 
-from ..frame import UnitFrame
-from ..geometry import Mesh, PointCloud
-from ..sampling import sample_surface
+from engine.frame import UnitFrame
+from engine.geometry import Mesh, PointCloud
+from engine.sampling import sample_surface
 from .scan import virtual_scan
 from .shapes.cars import make_car
 from .shapes.garments import make_garment
@@ -193,7 +193,7 @@ def real_shapes() -> List[Tuple[str, Mesh]]:
 
     Raises ``FileNotFoundError`` naming the folder when the shared data is missing.
     """
-    from ..io import read_mesh
+    from engine.io import read_mesh
 
     root = os.path.join(shared_dir(), "data", "real")
     if not os.path.isdir(root):

@@ -23,7 +23,7 @@ from typing import Callable, Dict
 
 import numpy as np
 
-from ..geometry import Mesh, PointCloud
+from engine.geometry import Mesh, PointCloud
 
 Method = Callable[[PointCloud], Mesh]
 
@@ -101,7 +101,7 @@ def make_poisson(depth: int = 9, knn: int = 30, orient_k: int = 30, trim_quantil
 def _reconstruct_function():
     """``engine.reconstruct.reconstruct``, or :class:`MethodUnavailable` if it is not built."""
     try:
-        from ..reconstruct import reconstruct
+        from engine.reconstruct import reconstruct
     except ImportError as error:
         raise MethodUnavailable(f"engine.reconstruct cannot be imported: {error}") from error
     return reconstruct
@@ -133,7 +133,7 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
     """
     import inspect
 
-    from ..settings import ReconstructSettings
+    from engine.settings import ReconstructSettings
 
     reconstruct = _reconstruct_function()
     config = ReconstructSettings(radius_mode=radius_mode, resolution=resolution, device=device,
@@ -159,7 +159,7 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
 def ours_name(radius_mode: str = "fixed", radius: float = None) -> str:
     """The result name of ours: ``ours`` (fixed, default radius), ``ours-r<radius>`` (fixed,
     another radius) or ``ours-<mode>``; the JSON files are named after it."""
-    from ..settings import ReconstructSettings
+    from engine.settings import ReconstructSettings
 
     if radius_mode != "fixed":
         return f"ours-{radius_mode}"
@@ -171,7 +171,7 @@ def ours_name(radius_mode: str = "fixed", radius: float = None) -> str:
 def _check_radius_mode(config) -> None:
     """Raise :class:`MethodUnavailable` when the engine has no policy for the radius mode."""
     try:
-        from ..radius import POLICIES
+        from engine.radius import POLICIES
     except ImportError:
         return  # let the engine report it
     if config.radius_mode not in POLICIES:

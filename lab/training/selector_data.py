@@ -19,12 +19,12 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
+from engine.field import NETWORK_BAND_NODES, predict_trimmed
+from engine.frame import UnitFrame
+from engine.patches import MAX_POINTS, gather_patches
+from engine.selector import parent_features
+from engine.settings import ReconstructSettings
 from ..bench.dataset import CONDITIONS, ScanCondition, make_input, make_shape
-from ..field import NETWORK_BAND_NODES, predict_trimmed
-from ..frame import UnitFrame
-from ..patches import MAX_POINTS, gather_patches
-from ..selector import parent_features
-from ..settings import ReconstructSettings
 from .mesh_distance import point_mesh_distance
 from .radius_targets import CANDIDATE_RADII
 

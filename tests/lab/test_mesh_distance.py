@@ -1,6 +1,6 @@
 import numpy as np
 
-from engine.training.mesh_distance import closest_points_on_triangles, point_mesh_distance
+from lab.training.mesh_distance import closest_points_on_triangles, point_mesh_distance
 
 
 def _brute_force_closest(p, a, b, c, grid=400):

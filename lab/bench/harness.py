@@ -1,8 +1,8 @@
 """Run a reconstruction method over benchmark shapes and score it.
 
-A *method* is any callable ``PointCloud -> Mesh`` (see :mod:`engine.bench.methods`). For each of
+A *method* is any callable ``PointCloud -> Mesh`` (see :mod:`lab.bench.methods`). For each of
 the first ``count`` test shapes of a domain, :func:`run_benchmark` builds the ground truth and the
-input cloud under a condition (:mod:`engine.bench.dataset`), times the method, measures its peak
+input cloud under a condition (:mod:`lab.bench.dataset`), times the method, measures its peak
 memory, and scores the output with :func:`engine.metrics.evaluate` in the ground truth's unit
 frame. A method that raises is *failed*: it is scored as the worst result (CD inf, F1 0, NC 0)
 and counted, never skipped; an output without faces is scored the same way and counted as
@@ -42,8 +42,8 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from ..geometry import Mesh, PointCloud
-from ..metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
+from engine.geometry import Mesh, PointCloud
+from engine.metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
 
 METRIC_KEYS = ("cd_l1_x100", "cd_l2") + tuple(f1_key(t) for t in DEFAULT_THRESHOLDS) + ("nc",)
 LAYER_KEYS = ("double_layer", "gt_double_layer", "area_ratio")
@@ -136,7 +136,7 @@ def _score(pred: Mesh, gt: Mesh, samples: int, seed: int, crop: Optional[Callabl
     With ``crop``, the ground truth is cropped to ``visible_points`` and the prediction to
     ``input_points`` (see the module docstring).
     """
-    from ..frame import UnitFrame
+    from engine.frame import UnitFrame
 
     frame = UnitFrame.from_points(np.asarray(gt.vertices, dtype=np.float64))
     if crop is not None:
@@ -168,7 +168,7 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
     progress : callable ``(fraction, message)`` or None
     name : the method's name in the result; default ``method.__name__``
     dataset : module-like object with ``test_seeds``, ``make_shape``, ``make_input`` and optional
-        ``crop_to_input``; default :mod:`engine.bench.dataset` (tests pass a small stand-in).
+        ``crop_to_input``; default :mod:`lab.bench.dataset` (tests pass a small stand-in).
         The method is given ``PointCloud(points)`` only (no normals, no colours).
     crop_max_dist : distance of the rooms crop (unit frame)
     pass_ground_truth : call ``method(cloud, gt)`` instead; only for :func:`ground_truth`, the

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ..sampling import sample_surface
+from engine.sampling import sample_surface
 
 
 def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,

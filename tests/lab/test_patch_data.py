@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from engine.patches import MAX_POINTS
-from engine.training import patch_data as pd
+from lab.training import patch_data as pd
 
 
 def test_ground_truth_plane_is_abs_z():

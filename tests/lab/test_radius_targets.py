@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from engine.training.radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets,
-                                            loss_weights, parabola_targets, selector_loss)
+from lab.training.radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets,
+                                         loss_weights, parabola_targets, selector_loss)
 
 
 def test_candidate_radii_are_the_papers_seven():

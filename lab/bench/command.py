@@ -1,4 +1,4 @@
-"""``python -m engine bench``: run a reconstruction method over benchmark shapes, print a table.
+"""``python -m lab bench``: run a reconstruction method over benchmark shapes, print a table.
 
 One row per domain × condition; each row's full result (per-shape metrics, timings, memory) is
 written as JSON to ``--out`` (``<method>_<domain>_<condition>.json``). ``--table`` runs every
@@ -8,17 +8,17 @@ one table per condition; a mode the engine has not built yet is reported as 'not
 
 Examples::
 
-    python -m engine bench --method poisson --domain all --condition clean --count 20
-    python -m engine bench --method ours --radius-mode fixed --domain cars --condition noisy
-    python -m engine bench --table --condition clean --count 20
-    python -m engine bench --method ours --domain rooms --condition noisy --count 30 --resume
-    python -m engine bench --method poisson --report     # table of the JSON files in --out
-    python -m engine bench --table --report --condition clean   # Table I from those files
+    python -m lab bench --method poisson --domain all --condition clean --count 20
+    python -m lab bench --method ours --radius-mode fixed --domain cars --condition noisy
+    python -m lab bench --table --condition clean --count 20
+    python -m lab bench --method ours --domain rooms --condition noisy --count 30 --resume
+    python -m lab bench --method poisson --report     # table of the JSON files in --out
+    python -m lab bench --table --report --condition clean   # Table I from those files
 """
 
 import sys
 
-from ..settings import DEVICES, RADIUS_MODES
+from engine.settings import DEVICES, RADIUS_MODES
 
 CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
 DOMAIN_NAMES = ("cars", "garments", "rooms")
@@ -44,7 +44,9 @@ def add_arguments(parser) -> None:
                              "on a many-core GPU machine, e.g. 12)")
     parser.add_argument("--samples", type=int, default=100_000,
                         help="metric samples per mesh (default 100000)")
-    parser.add_argument("--seed", type=int, default=0, help="metric sampling seed (default 0)")
+    parser.add_argument("--sample-seed", type=int, default=0,
+                        help="seed of the metric's surface samples; the shapes and their inputs "
+                             "have fixed seeds of their own (default 0)")
     parser.add_argument("--resolution", type=int, default=256,
                         help="grid resolution of ours (default 256)")
     parser.add_argument("--device", default="auto", choices=DEVICES,
@@ -57,12 +59,13 @@ def add_arguments(parser) -> None:
                         help="with --table: the method whose row is printed under the radius "
                              "modes, run on the same shapes (default poisson; none for no row)")
     parser.add_argument("--report", action="store_true",
-                        help="run nothing: print the table (with --table, Table I) of the JSON results "
-                             "already in --out")
+                        help="run nothing: print the table (with --table, Table I) of the JSON "
+                             "results already in --out")
     parser.add_argument("--resume", action="store_true",
                         help="keep the shapes already scored in --out's JSON for the same method, "
-                             "domain, condition, samples and seed; run only the missing ones "
-                             "(extends a run to a larger --count, or finishes an interrupted one)")
+                             "domain, condition, samples and sample seed; run only the missing "
+                             "ones (extends a run to a larger --count, or finishes an interrupted "
+                             "one)")
     parser.add_argument("--quiet", action="store_true", help="no per-shape progress on stderr")
 
 
@@ -84,7 +87,7 @@ def _factory(args, name: str, radius_mode: str):
     """A picklable callable that builds the method (in this process or in a worker)."""
     import functools
 
-    from ..bench.methods import make_method
+    from .methods import make_method
 
     options = {}
     if name in ("ours", "nearest-udf"):
@@ -98,9 +101,10 @@ def _factory(args, name: str, radius_mode: str):
 
 def run(args) -> int:
     """Run the benchmark(s), print the markdown table(s), write the JSON files."""
-    from ..bench.harness import format_table, ground_truth, run_benchmark, write_json
-    from ..bench.methods import METHODS, MethodUnavailable
-    from ..errors import InputError
+    from engine.errors import InputError
+
+    from .harness import format_table, ground_truth, run_benchmark, write_json
+    from .methods import METHODS, MethodUnavailable
 
     if args.count < 1:
         raise InputError("--count must be at least 1")
@@ -131,7 +135,7 @@ def run(args) -> int:
     results = []
     for condition in conditions:
         for domain in domains:
-            result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
+            result = run_benchmark(method, domain, condition, args.count, seed=args.sample_seed,
                                    samples=args.samples, progress=progress, name=name,
                                    pass_ground_truth=oracle, jobs=1 if oracle else args.jobs,
                                    method_factory=factory,
@@ -147,7 +151,7 @@ def _earlier(args, name: str, domain: str, condition: str):
     """With ``--resume``, the result already in ``--out`` for this row (None when there is none)."""
     import os
 
-    from ..bench.harness import read_json, result_filename
+    from .harness import read_json, result_filename
 
     path = os.path.join(args.out, result_filename(
         {"method": name, "domain": domain, "condition": condition}))
@@ -160,8 +164,8 @@ def _report(args, domains, conditions) -> int:
     """Print the table of the results in ``--out`` for the selected method, domains, conditions."""
     import os
 
-    from ..bench.harness import format_table, read_json
-    from ..bench.methods import ours_name
+    from .harness import format_table, read_json
+    from .methods import ours_name
 
     name = ours_name(args.radius_mode, args.radius) if args.method == "ours" else args.method
     results, missing = [], []
@@ -183,7 +187,7 @@ def _load_result(args, method: str, domain: str, condition: str):
     missing or shorter."""
     import os
 
-    from ..bench.harness import first_shapes, read_json
+    from .harness import first_shapes, read_json
 
     path = os.path.join(args.out, f"{method}_{domain}_{condition}.json")
     if not os.path.exists(path):
@@ -204,8 +208,8 @@ def _run_table(args, domains, conditions, progress) -> int:
     """Table I: one row per radius mode of ``ours`` (and the reference method), columns per
     domain. With ``--report`` the table is assembled from the JSON results already in ``--out``
     (runs done one at a time)."""
-    from ..bench.harness import first_shapes, run_benchmark, write_json
-    from ..bench.methods import MethodUnavailable, ours_name
+    from .harness import first_shapes, run_benchmark, write_json
+    from .methods import MethodUnavailable, ours_name
 
     for condition in conditions:
         cells = {}
@@ -225,7 +229,7 @@ def _run_table(args, domains, conditions, progress) -> int:
                 continue
             cells[label] = {}
             for domain in domains:
-                result = run_benchmark(method, domain, condition, args.count, seed=args.seed,
+                result = run_benchmark(method, domain, condition, args.count, seed=args.sample_seed,
                                        samples=args.samples, progress=progress, jobs=args.jobs,
                                        method_factory=factory, earlier=_earlier(
                                            args, method.__name__, domain, condition))
@@ -247,7 +251,7 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
     domains : the domains, in column order
     condition, count, samples : stated in the caption
     """
-    from ..bench.harness import _fmt
+    from .harness import _fmt
 
     keys = (("cd_l1_x100", 3), ("f1_0.005", 3), ("f1_0.01", 3), ("nc", 3))
     head = "| radius mode | " + " | ".join(

@@ -1,7 +1,7 @@
 """Proofs for the benchmark harness: scoring, failures, aggregates, table, JSON, determinism, CLI.
 
 A tiny stand-in dataset (two octahedron-based spheres) keeps these fast and independent of
-``engine.bench.dataset``; one test also runs the real dataset when it exists.
+``lab.bench.dataset``; one test also runs the real dataset when it exists.
 """
 
 import json
@@ -11,12 +11,12 @@ import types
 import numpy as np
 import pytest
 
-from engine.bench import harness
-from engine.bench.harness import (METRIC_KEYS, PeakMemory, format_table, run_benchmark,
-                                  summarize, write_json)
 from engine.geometry import Mesh, PointCloud
 from engine.metrics import evaluate
 from engine.sampling import sample_surface
+from lab.bench import harness
+from lab.bench.harness import (METRIC_KEYS, PeakMemory, format_table, run_benchmark,
+                               summarize, write_json)
 
 SAMPLES = 4000
 
@@ -48,7 +48,7 @@ def sphere(subdivisions: int = 3, radius: float = 0.5) -> Mesh:
 
 
 def fake_dataset(crop=False):
-    """A module-like stand-in for engine.bench.dataset: spheres of seed-dependent squash."""
+    """A module-like stand-in for lab.bench.dataset: spheres of seed-dependent squash."""
 
     def make_shape(domain, seed):
         mesh = sphere()
@@ -188,8 +188,8 @@ def test_peak_memory_sees_native_allocations():
 
 
 def test_cli_prints_a_table_and_writes_json(tmp_path, monkeypatch, capsys):
-    from engine.__main__ import main
-    from engine.bench import methods
+    from lab.__main__ import main
+    from lab.bench import methods
 
     dataset = fake_dataset()
     monkeypatch.setattr(harness, "_default_dataset", lambda: dataset)
@@ -210,7 +210,7 @@ def test_cli_prints_a_table_and_writes_json(tmp_path, monkeypatch, capsys):
 
 
 def test_table_one_reports_missing_modes():
-    from engine.commands.bench import format_table_one
+    from lab.bench.command import format_table_one
 
     result = run(lambda cloud: sphere(2), name="ours")
     text = format_table_one({"fixed": {"cars": result}, "learned": "not available (no weights)"},
@@ -221,7 +221,7 @@ def test_table_one_reports_missing_modes():
 
 
 def test_table_one_bolds_the_best_value_of_each_column():
-    from engine.commands.bench import format_table_one
+    from lab.bench.command import format_table_one
 
     def result(cd, f1, nc):
         summary = {"cd_l1_x100": cd, "f1_0.005": f1, "f1_0.01": 1.0, "nc": nc, "empty": 0,
@@ -240,7 +240,7 @@ def test_table_one_bolds_the_best_value_of_each_column():
 
 
 def test_real_dataset_smoke():
-    dataset = pytest.importorskip("engine.bench.dataset")
+    dataset = pytest.importorskip("lab.bench.dataset")
     gt = dataset.make_shape("garments", dataset.test_seeds("garments", 1)[0])
     result = run_benchmark(lambda cloud: gt, "garments", "clean", 1, samples=SAMPLES)
     floor = evaluate(gt, gt, samples=SAMPLES, seed=0)
@@ -263,8 +263,8 @@ def test_method_gets_points_only():
 
 
 def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
-    from engine.__main__ import main
-    from engine.bench import methods
+    from lab.__main__ import main
+    from lab.bench import methods
 
     def fake_ours(radius_mode="fixed", **options):
         if radius_mode == "learned":
@@ -327,7 +327,7 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
 
 
 def test_table_reference_row_comes_from_the_reference_methods_results(capsys, tmp_path):
-    from engine.__main__ import main
+    from lab.__main__ import main
 
     ours = run(lambda cloud: sphere(2), name="ours")
     poisson = run(lambda cloud: sphere(1), name="poisson")
@@ -350,7 +350,7 @@ def test_table_reference_row_comes_from_the_reference_methods_results(capsys, tm
 
 
 def test_first_shapes_recomputes_the_summary():
-    from engine.bench.harness import first_shapes
+    from lab.bench.harness import first_shapes
 
     rows = [{"empty": False, "failed": False, "cd_l1_x100": cd, "cd_l2": cd, "f1_0.005": 1.0,
              "f1_0.01": 1.0, "nc": 1.0, "seconds": 1.0, "peak_rss_mb": 1.0, "peak_delta_mb": 0.0}
@@ -364,7 +364,7 @@ def test_first_shapes_recomputes_the_summary():
 
 
 def test_registry_reports_unavailable_methods():
-    from engine.bench import methods
+    from lab.bench import methods
 
     with pytest.raises(KeyError):
         methods.make_method("no-such-method")
@@ -376,7 +376,7 @@ def test_registry_reports_unavailable_methods():
 
 
 def test_results_of_another_radius_get_their_own_name():
-    from engine.bench import methods
+    from lab.bench import methods
 
     assert methods.make_method("ours", radius=0.024).__name__ == "ours-r0.024"
     assert methods.make_method("ours", radius=0.018).__name__ == "ours"
@@ -385,7 +385,7 @@ def test_results_of_another_radius_get_their_own_name():
 
 def test_poisson_is_deterministic_and_closes_a_sphere():
     pytest.importorskip("open3d")
-    from engine.bench.methods import make_method
+    from lab.bench.methods import make_method
 
     gt = sphere(4)
     points, _, _ = sample_surface(gt.vertices, gt.faces, 3000, np.random.default_rng(0))
@@ -400,7 +400,7 @@ def test_poisson_is_deterministic_and_closes_a_sphere():
 def test_parallel_shapes_score_as_the_serial_run():
     import functools
 
-    from engine.bench import methods
+    from lab.bench import methods
 
     factory = functools.partial(methods.make_method, "nearest-udf", resolution=48, device="cpu")
     serial = run_benchmark(factory(), "garments", "clean", 2, samples=SAMPLES)
@@ -457,8 +457,8 @@ def test_resume_refuses_another_benchmark_and_reads_failures_back(tmp_path):
 
 
 def test_cli_resume_extends_the_json(tmp_path, monkeypatch, capsys):
-    from engine.__main__ import main
-    from engine.bench import methods
+    from lab.__main__ import main
+    from lab.bench import methods
 
     monkeypatch.setattr(harness, "_default_dataset", lambda: fake_dataset())
     calls = []
