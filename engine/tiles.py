@@ -102,7 +102,7 @@ def stitch(pieces, spacing: float):
     offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
     faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
                            + [np.zeros((0, 3), np.int64)]).astype(np.int64)
-    stats = {"welded": 0, "flipped": 0, "holes_closed": 0}
+    stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0}
     if not len(faces):
         return vertices, faces, stats
     tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
@@ -121,8 +121,29 @@ def stitch(pieces, spacing: float):
         # a face both tiles kept once its corners are welded: keep it once
         faces = faces[np.sort(np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1])]
         stats["welded"] = int(len(vertices) - len(np.unique(merged)))
+        faces, stats["ears_dropped"] = _drop_ears(faces)
         faces, stats["holes_closed"] = close_pinholes(faces, SEAM_HOLE_EDGES)
     return vertices, faces, stats
+
+
+def _drop_ears(faces: np.ndarray, passes: int = 3):
+    """Drop the faces left hanging on a weld: a face with a third face on one of its edges and
+    nothing on the other two (one tile's face over the other tile's, sharing an edge).
+    Returns the faces and how many were dropped."""
+    from .meshing.mesh_ops import edge_topology
+
+    dropped = 0
+    for _ in range(passes):
+        if not len(faces):
+            break
+        topo = edge_topology(faces)
+        uses = topo.counts[topo.face_edges]
+        ear = ((uses == 1).sum(axis=1) == 2) & ((uses > 2).sum(axis=1) == 1)
+        if not ear.any():
+            break
+        faces = faces[~ear]
+        dropped += int(ear.sum())
+    return faces, dropped
 
 
 def _pairs_across(points: np.ndarray, tile_of: np.ndarray, spacing: float):
