@@ -53,9 +53,9 @@ def register_main() -> bool:
 def register():
     import bpy
 
-    from .operators import install
+    from .runtime import installer
 
-    install.add_to_path()  # packages installed from the preferences, if any
+    installer.add_to_path()  # packages installed from the preferences, if any
     for module in _always():
         for cls in module.CLASSES:
             bpy.utils.register_class(cls)
@@ -65,7 +65,7 @@ def register():
 def unregister():
     import bpy
 
-    from .operators import install
+    from .runtime import installer
 
     if _main["registered"]:
         del bpy.types.Scene.udf_reconstruction
@@ -76,4 +76,4 @@ def unregister():
     for module in reversed(_always()):
         for cls in reversed(module.CLASSES):
             bpy.utils.unregister_class(cls)
-    install.remove_from_path()
+    installer.remove_from_path()

@@ -1,1 +1,2 @@
-"""Blender operators and the bpy <-> numpy bridge they share."""
+"""Blender operators: Reconstruct, Cancel and Install Missing Packages (what they share with the
+panel lives in ``runtime/``)."""

@@ -336,7 +336,7 @@ def add_to_scene(mesh, name, args, count, prefix, package) -> None:
     """Put the mesh in the scene (for --blend) and render its preview (--preview)."""
     from mathutils import Matrix
 
-    bridge = importlib.import_module(package + ".operators.bridge")
+    bridge = importlib.import_module(package + ".runtime.bridge")
     context = bpy.context
     obj = bridge.new_mesh_object(context, mesh, name, Matrix.Identity(4))
     if args.preview:

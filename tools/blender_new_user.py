@@ -41,17 +41,10 @@ import addon_utils
 import bpy
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from blender_window import finish, screenshot, sidebar, view3d  # noqa: E402
+from blender_window import (Failed, check, finish, guarded, log, shot, sidebar,  # noqa: E402
+                            start_flow, view3d)
 
-ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-if len(ARGS) < 3:
-    print("usage: blender --python tools/blender_new_user.py -- ZIP CLOUD.ply SHOT_DIR [RES]")
-    sys.stdout.flush()
-    os._exit(2)
-ZIP = Path(ARGS[0]).resolve()
-CLOUD = Path(ARGS[1]).resolve()
-SHOTS = Path(ARGS[2]).resolve()
-RESOLUTION = int(ARGS[3]) if len(ARGS) > 3 else 64
+ZIP, CLOUD, RESOLUTION = start_flow("blender_new_user.py", "new-user", 64)
 EXTENSION_ID = "udf_reconstruction"
 PACKAGE = f"bl_ext.user_default.{EXTENSION_ID}"
 TAB = "Reconstruct"
@@ -62,33 +55,13 @@ bpy.context.preferences.view.show_splash = False  # before the first window is d
 state = {"phase": "start", "started": time.time()}
 
 
-class Failed(Exception):
-    pass
-
-
-def log(message):
-    print(f"[new-user] {message}", flush=True)
-
-
-def check(condition, message):
-    if not condition:
-        raise Failed(message)
-
-
 def in_view3d():
     window, area, region = view3d()
     return bpy.context.temp_override(window=window, area=area, region=region)
 
 
-def shot(name):
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    path = SHOTS / name
-    screenshot(path)
-    log(f"screenshot {path}")
-
-
-def reconstruct_module():
-    return importlib.import_module(PACKAGE + ".operators.reconstruct")
+def running_job():
+    return importlib.import_module(PACKAGE + ".runtime.job").running_job()
 
 
 def datablocks():
@@ -174,7 +147,7 @@ def invoke_reconstruct():
         # as a click on the button: INVOKE_DEFAULT in the 3D view, undo=True
         result = bpy.ops.udf_reconstruction.reconstruct('INVOKE_DEFAULT', True)
     check(result == {'RUNNING_MODAL'}, f"Reconstruct -> {result} (expected RUNNING_MODAL)")
-    job = reconstruct_module().running_job()
+    job = running_job()
     check(job is not None, "no job is running after the click")
     return job
 
@@ -266,7 +239,7 @@ def tick():
         return 0.05
     if phase == "wait cancel":
         job = state["job"]
-        over = not job.running and reconstruct_module().running_job() is None
+        over = not job.running and running_job() is None
         waited = now - state["asked"]
         if not over:
             check(waited < CANCEL_WITHIN, f"the job was still running {waited:.1f} s after "
@@ -290,7 +263,7 @@ def tick():
         return 0.2
     if phase == "wait result":
         job = state["job"]
-        if reconstruct_module().running_job() is not None:
+        if running_job() is not None:
             check(now - state["since"] < 600, "no result after 600 s")
             if not state["shot running"] and job.fraction >= 0.3:
                 state["shot running"] = True
@@ -309,16 +282,5 @@ def tick():
     return None
 
 
-def guarded_tick():
-    try:
-        return tick()
-    except Failed as error:
-        log(f"FAILED ({state['phase']}): {error}")
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        log(f"FAILED ({state['phase']}): unexpected error")
-    finish(1)  # a timer that raises is dropped silently and Blender would stay open
-
-
-bpy.app.timers.register(guarded_tick, first_interval=2.0)
+bpy.app.timers.register(guarded(tick, lambda: f" ({state['phase']})"),
+                        first_interval=2.0)

@@ -72,7 +72,7 @@ def setup():
     extension = enable_extension()
     io = importlib.import_module(PACKAGE + ".engine.io")
     geometry = importlib.import_module(PACKAGE + ".engine.geometry")
-    bridge = importlib.import_module(PACKAGE + ".operators.bridge")
+    bridge = importlib.import_module(PACKAGE + ".runtime.bridge")
     assert extension is not None
 
     for obj in list(bpy.data.objects):  # the factory cube, camera and light
@@ -147,7 +147,7 @@ def tick():
             finish(1)
         state["phase"] = "running"
         return 0.5
-    job = importlib.import_module(PACKAGE + ".operators.reconstruct").running_job()
+    job = importlib.import_module(PACKAGE + ".runtime.job").running_job()
     if phase == "running":
         if job is not None and job.fraction >= 0.3:
             time.sleep(0.3)  # let the 0.1 s timer redraw the panel with this progress

@@ -41,15 +41,10 @@ from pathlib import Path
 import bpy
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from blender_window import finish, screenshot, sidebar, view3d  # noqa: E402
+from blender_window import (Failed, check, finish, guarded, log, shot, sidebar,  # noqa: E402
+                            start_flow, view3d)
 
-ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-if len(ARGS) < 3:
-    print("usage: blender --python tools/blender_ui_check.py -- ZIP CLOUD.ply SHOT_DIR [RES]")
-    sys.stdout.flush()
-    os._exit(2)
-ZIP, CLOUD, SHOTS = (Path(a).resolve() for a in ARGS[:3])
-RESOLUTION = int(ARGS[3]) if len(ARGS) > 3 else 128
+ZIP, CLOUD, RESOLUTION = start_flow("blender_ui_check.py", "ui-check", 128)
 PACKAGE = "bl_ext.user_default.udf_reconstruction"
 REPORT_WITHIN = 1.0  # seconds from the click to the missing-package report
 # The words of the mesher's own diagnostics, which belong in the console, not the Info log.
@@ -57,25 +52,6 @@ JARGON = re.compile(r"(?i)\biso\b|voxel|cover|seed region|unbalanced|cut \d|twin
                     r"fragmented|queries|band")
 
 bpy.context.preferences.view.show_splash = False
-
-
-class Failed(Exception):
-    pass
-
-
-def log(message):
-    print(f"[ui-check] {message}", flush=True)
-
-
-def check(condition, message):
-    if not condition:
-        raise Failed(message)
-
-
-def shot(name):
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    screenshot(SHOTS / name)
-    log(f"screenshot {SHOTS / name}")
 
 
 def module(name):
@@ -166,11 +142,11 @@ def select_only(obj):
 
 def wait_for_job(limit):
     """Yield waits until the reconstruction started by a click is over."""
-    reconstruct = module("operators.reconstruct")
+    job = module("runtime.job")
     started = time.time()
-    while reconstruct.running_job() is None and time.time() - started < 5:
+    while job.running_job() is None and time.time() - started < 5:
         yield 0.1  # the click is processed at the next event
-    while reconstruct.running_job() is not None:
+    while job.running_job() is not None:
         check(time.time() - started < limit, f"no result after {limit} s")
         yield 0.5
     yield 1.0  # the result is drawn
@@ -188,7 +164,7 @@ def flow():
             filepath=str(ZIP), repo='user_default', enable_on_install=True)
     check(result == {'FINISHED'} and PACKAGE in bpy.context.preferences.addons,
           f"installing {ZIP.name} -> {result}")
-    missing = module("operators.dependencies").missing_packages()
+    missing = module("runtime.dependencies").missing_packages()
     check("scipy" in missing, f"this check needs a Blender without scipy (missing: {missing})")
     log(f"step 1: {ZIP.name} installed and enabled in Blender {bpy.app.version_string} "
         f"(Python {sys.version.split()[0]}); missing: {', '.join(missing)}")
@@ -204,7 +180,7 @@ def flow():
     cube = bpy.data.objects.get("Cube")  # the startup cube would hide the sphere's mesh
     if cube is not None:
         bpy.data.objects.remove(cube)
-    numpy_found = module("operators.dependencies").is_found("numpy")
+    numpy_found = module("runtime.dependencies").is_found("numpy")
     if numpy_found:
         cloud = sphere_cloud("Sphere")
         bpy.context.scene.collection.objects.link(cloud)
@@ -257,22 +233,22 @@ def flow():
     region = next(r for r in prefs_area.regions if r.type == 'WINDOW')
     button = yield from find_button(window, region, "udf_reconstruction.install_packages")
     click(button)
-    install = module("operators.install")
+    installer = module("runtime.installer")
     started = time.time()
-    while install.running_install() is None and install.last_result() is None:
+    while installer.running_install() is None and installer.last_result() is None:
         check(time.time() - started < 5, "the install did not start")
         yield 0.1
     shown = False
-    while install.running_install() is not None:
+    while installer.running_install() is not None:
         check(time.time() - started < 900, "the install took over 15 minutes")
-        if not shown and install.running_install().fraction > 0.2:
+        if not shown and installer.running_install().fraction > 0.2:
             shown = True
             shot("ui_install_running.png")
         yield 0.5
-    ok, message = install.last_result()
+    ok, message = installer.last_result()
     log(f"step 3: Install Missing Packages: {message}")
     check(ok, message)
-    check(not module("operators.dependencies").missing_packages(), "still missing packages")
+    check(not module("runtime.dependencies").missing_packages(), "still missing packages")
     yield 1.5
     shot("ui_install_packages.png")
     prefs_area.type = 'VIEW_3D'
@@ -341,18 +317,4 @@ def flow():
 
 
 _flow = flow()
-
-
-def tick():
-    try:
-        return next(_flow)
-    except Failed as error:
-        log(f"FAILED: {error}")
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        log("FAILED: unexpected error")
-    finish(1)  # a timer that raises is dropped silently and Blender would stay open
-
-
-bpy.app.timers.register(tick, first_interval=2.0)
+bpy.app.timers.register(guarded(lambda: next(_flow)), first_interval=2.0)

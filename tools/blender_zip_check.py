@@ -61,7 +61,7 @@ def main() -> int:
     if addon_utils.enable(EXTENSION, default_set=True, handle_error=errors.append) is None:
         step(f"FAILED: the extension does not enable: {errors}")
         return 1
-    dependencies = importlib.import_module(EXTENSION + ".operators.dependencies")
+    dependencies = importlib.import_module(EXTENSION + ".runtime.dependencies")
     missing = dependencies.missing_packages()
     step(f"enabled; missing packages: {missing or 'none'}")
     if missing:
@@ -70,9 +70,9 @@ def main() -> int:
             return 1
         started = time.perf_counter()
         result = bpy.ops.udf_reconstruction.install_packages()
-        install = importlib.import_module(EXTENSION + ".operators.install")
+        installer = importlib.import_module(EXTENSION + ".runtime.installer")
         step(f"Install Missing Packages: {result} in {time.perf_counter() - started:.0f} s: "
-             f"{install.last_result()}")
+             f"{installer.last_result()}")
         if result != {'FINISHED'} or dependencies.missing_packages():
             step("FAILED: the install did not bring the packages")
             return 1

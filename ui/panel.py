@@ -2,8 +2,8 @@
 
 import bpy
 
-from ..operators import bridge, dependencies
-from ..operators.reconstruct import running_job
+from ..runtime import bridge, dependencies
+from ..runtime.job import running_job
 from .properties import DEVICE_ITEMS, scene_settings
 
 

@@ -1,5 +1,5 @@
 """Add-on preferences: which Python packages the engine found (the table is in
-``operators/dependencies.py``), a button that installs the missing ones, and whether a GPU can be
+``runtime/dependencies.py``), a button that installs the missing ones, and whether a GPU can be
 used."""
 
 import sys
@@ -7,15 +7,15 @@ import sys
 import bpy
 
 from .. import __package__ as base_package
-from ..operators import install
-from ..operators.dependencies import dependency_status, gpu_text
+from ..runtime import installer
+from ..runtime.dependencies import dependency_status, gpu_text
 
 
 def _draw_install(layout) -> None:
     """The install button, its progress while pip runs, and the result of the last run."""
-    running = install.running_install()
-    result = install.last_result()
-    wanted = install.to_install()
+    running = installer.running_install()
+    result = installer.last_result()
+    wanted = installer.to_install()
     if running is not None:
         box = layout.box()
         row = box.row(align=True)
@@ -39,7 +39,7 @@ def _draw_install(layout) -> None:
         box.label(text="Install them here (downloads them with pip), or install the extension "
                        f"zip made for your platform and Python {python}.")
         box.operator("udf_reconstruction.install_packages", icon='IMPORT')
-        folder = install.packages_folder()
+        folder = installer.packages_folder()
         if folder:
             box.label(text=f"Installs into {folder}", icon='FILE_FOLDER')
 

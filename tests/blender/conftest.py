@@ -54,7 +54,7 @@ class Extension:
         addon_utils.disable(PACKAGE, default_set=True)
 
     def module(self, name: str):
-        """A submodule of the extension, e.g. ``module("operators.bridge")``."""
+        """A submodule of the extension, e.g. ``module("runtime.bridge")``."""
         return importlib.import_module(f"{PACKAGE}.{name}")
 
 

@@ -45,7 +45,7 @@ def poll_message():
 def no_job_left(extension):
     """A job started by hand and not finished must not block the next test."""
     yield
-    extension.module("operators.reconstruct")._job = None
+    extension.module("runtime.job").end_job()
 
 
 @pytest.fixture
@@ -57,7 +57,7 @@ def quick(scene):
 @pytest.fixture
 def gpu(extension, monkeypatch):
     """Set what the GPU probe says: ``gpu(False)``, ``gpu(True, "name")``."""
-    dependencies = extension.module("operators.dependencies")
+    dependencies = extension.module("runtime.dependencies")
 
     def set_gpu(available, name=""):
         monkeypatch.setitem(dependencies._gpu, "known", True)
@@ -138,9 +138,8 @@ def test_nothing_selected_reconstructs_nothing(quick, extension):
     assert "Nothing is selected" in poll_message()
     assert set(bpy.data.objects) == before
     assert "Nothing selected" in draw(extension).labels
-    reconstruct = extension.module("operators.reconstruct")
     with pytest.raises(Exception, match="Nothing is selected"):
-        reconstruct.start_job(bpy.context)  # what invoke() does
+        extension.module("runtime.job").start_job(bpy.context)  # what invoke() does
 
 
 def test_after_a_run_the_panel_offers_the_cloud_again_not_the_result(quick, extension):
@@ -152,7 +151,7 @@ def test_after_a_run_the_panel_offers_the_cloud_again_not_the_result(quick, exte
     drawn = draw(extension)
     assert "Scan_mesh: made from Scan" in drawn.labels
     assert drawn.button[2] == "Reconstruct Again"
-    target = extension.module("operators.bridge").reconstruct_target(bpy.context)
+    target = extension.module("runtime.bridge").reconstruct_target(bpy.context)
     assert target.source == bpy.data.objects["Scan"], "the cloud, not the result, is meshed"
 
 
@@ -231,7 +230,7 @@ def test_a_failed_run_does_not_hide_the_cloud(quick):
 
 @pytest.fixture
 def missing_package(extension, monkeypatch):
-    dependencies = extension.module("operators.dependencies")
+    dependencies = extension.module("runtime.dependencies")
     monkeypatch.setattr(dependencies, "DEPENDENCIES", dependencies.DEPENDENCIES + (
         ("udfr_no_such_module", "NoSuchPackage", "testing", True),))
     return "NoSuchPackage"
@@ -239,14 +238,14 @@ def missing_package(extension, monkeypatch):
 
 def test_a_missing_package_is_reported_before_any_work(quick, extension, monkeypatch,
                                                        missing_package):
-    bridge = extension.module("operators.bridge")
-    reconstruct = extension.module("operators.reconstruct")
+    bridge = extension.module("runtime.bridge")
+    job = extension.module("runtime.job")
 
     def no_work(*args, **kwargs):
         raise AssertionError("the points were read although a package is missing")
 
     monkeypatch.setattr(bridge, "read_point_cloud", no_work)
-    monkeypatch.setattr(reconstruct, "Job", no_work)
+    monkeypatch.setattr(job, "Job", no_work)
     add_cloud("Scan", sphere_points(20_000, 1.0))
     before = set(bpy.data.objects)
     started = time.perf_counter()
@@ -254,7 +253,7 @@ def test_a_missing_package_is_reported_before_any_work(quick, extension, monkeyp
         bpy.ops.udf_reconstruction.reconstruct()
     assert time.perf_counter() - started < 1.0
     assert set(bpy.data.objects) == before
-    assert reconstruct.running_job() is None
+    assert job.running_job() is None
 
 
 def test_the_panel_names_a_missing_package_in_red(quick, extension, missing_package):
@@ -264,12 +263,12 @@ def test_the_panel_names_a_missing_package_in_red(quick, extension, missing_pack
 
 def test_all_present_shows_no_red_line(quick, extension):
     add_cloud("Scan", sphere_points(POINTS, 1.0))
-    assert extension.module("operators.dependencies").missing_packages() == []
+    assert extension.module("runtime.dependencies").missing_packages() == []
     assert not any("Missing" in text for text in draw(extension).labels)
 
 
 def test_packages_are_named_as_users_install_them(extension):
-    dependencies = extension.module("operators.dependencies")
+    dependencies = extension.module("runtime.dependencies")
     reconstruct = extension.module("operators.reconstruct")
     assert dependencies.install_name("skimage.measure") == "scikit-image"
     for module, distribution, _, _ in dependencies.DEPENDENCIES:
@@ -296,7 +295,7 @@ def test_without_a_gpu_cuda_is_greyed_out_and_refused_at_once(quick, extension, 
     quick.udf_reconstruction.device = "cpu"
     assert not any("GPU" in text for text in draw(extension).labels)
     quick.udf_reconstruction.device = "cuda"
-    monkeypatch.setattr(extension.module("operators.bridge"), "read_point_cloud",
+    monkeypatch.setattr(extension.module("runtime.bridge"), "read_point_cloud",
                         lambda *a: pytest.fail("points read before the device was checked"))
     started = time.perf_counter()
     with pytest.raises(RuntimeError, match="No GPU was found.*Set Device to Auto or CPU"):
@@ -323,7 +322,7 @@ def test_preferences_do_not_claim_a_gpu_that_is_not_there(extension, gpu):
 
 
 def test_the_gpu_probe_agrees_with_torch(extension, monkeypatch):
-    dependencies = extension.module("operators.dependencies")
+    dependencies = extension.module("runtime.dependencies")
     monkeypatch.setattr(dependencies, "_gpu", {"known": False, "available": False, "name": "",
                                                "thread": None})
     try:
@@ -337,7 +336,7 @@ def test_the_gpu_probe_agrees_with_torch(extension, monkeypatch):
 # --- 4, 5, 8. words -------------------------------------------------------------------------------
 
 def test_progress_is_a_short_stage_name_and_a_percentage(extension):
-    wording = extension.module("operators.wording")
+    wording = extension.module("runtime.wording")
     reconstruct = extension.module("engine.reconstruct").reconstruct
     settings = extension.module("engine.settings").ReconstructSettings(resolution=RESOLUTION)
     seen = []
@@ -356,7 +355,7 @@ def finished_job(extension, quick, messages, faces=None):
     """A job run to the end on a small cloud, with the engine's notes replaced by ``messages``."""
     reconstruct = extension.module("operators.reconstruct")
     add_cloud("Scan", sphere_points(POINTS, 1.0))
-    job = reconstruct.start_job(bpy.context)
+    job = extension.module("runtime.job").start_job(bpy.context)
     job.run()
     assert job.error is None
     job.result.messages = list(messages)
@@ -445,9 +444,8 @@ def test_radius_range_fields_are_labelled_for_artists(quick, extension):
 
 
 def test_the_running_panel_shows_a_short_progress_text(quick, extension):
-    reconstruct = extension.module("operators.reconstruct")
     add_cloud("Scan", sphere_points(POINTS, 1.0))
-    job = reconstruct.start_job(bpy.context)
+    job = extension.module("runtime.job").start_job(bpy.context)
     job._progress(0.58, "network UDF: 49,152 / 84,297 queries")
     assert job.status_text == "Distances 58 %"
     drawn = draw(extension)

@@ -38,8 +38,8 @@ def make_wheel(folder, name: str, version: str, code: str, requires=()) -> None:
 def probe_missing(extension, monkeypatch, tmp_path):
     """A required package ``udfr-probe`` (needing numpy) that is missing, and a local 'index':
     its wheel and a fake numpy wheel of Blender's numpy version. pip sees nothing else."""
-    dependencies = extension.module("operators.dependencies")
-    install = extension.module("operators.install")
+    dependencies = extension.module("runtime.dependencies")
+    installer = extension.module("runtime.installer")
     monkeypatch.setattr(dependencies, "DEPENDENCIES", dependencies.DEPENDENCIES + (
         (PROBE, "udfr-probe", "testing", True),))
     wheels = tmp_path / "wheels"
@@ -47,11 +47,11 @@ def probe_missing(extension, monkeypatch, tmp_path):
     monkeypatch.setenv("PIP_NO_INDEX", "1")
     monkeypatch.setenv("PIP_FIND_LINKS", str(wheels))
     monkeypatch.setenv("PIP_CONFIG_FILE", os.devnull)
-    folder = install.packages_folder()
+    folder = installer.packages_folder()
     yield wheels
-    install._state.update(install=None, result=None)
+    installer._state.update(install=None, result=None)
     sys.modules.pop(PROBE, None)
-    install.remove_from_path()
+    installer.remove_from_path()
     if os.path.isdir(folder):
         import shutil
         shutil.rmtree(folder)
@@ -60,23 +60,23 @@ def probe_missing(extension, monkeypatch, tmp_path):
 
 def test_the_button_installs_into_the_extension_folder_and_it_imports_at_once(
         extension, probe_missing):
-    dependencies = extension.module("operators.dependencies")
-    install = extension.module("operators.install")
+    dependencies = extension.module("runtime.dependencies")
+    installer = extension.module("runtime.installer")
     make_wheel(probe_missing, PROBE, "1.0", "ANSWER = 42\n", requires=["numpy"])
     make_wheel(probe_missing, "numpy", np.__version__, "FAKE = True\n")
     assert dependencies.missing_packages() == ["udfr-probe"]
-    assert install.to_install() == ["udfr-probe"]
+    assert installer.to_install() == ["udfr-probe"]
     assert bpy.ops.udf_reconstruction.install_packages.poll()
 
     assert bpy.ops.udf_reconstruction.install_packages() == {'FINISHED'}
 
-    ok, message = install.last_result()
+    ok, message = installer.last_result()
     assert ok, message
     assert message.startswith("Installed udfr-probe in ") and "no restart needed" in message
     assert dependencies.missing_packages() == []
     probe = importlib.import_module(PROBE)
     assert probe.ANSWER == 42
-    folder = install.packages_folder()
+    folder = installer.packages_folder()
     assert os.path.realpath(probe.__file__).startswith(os.path.realpath(folder))
     assert folder.startswith(bpy.utils.user_resource('EXTENSIONS'))
     # numpy was pulled in as a dependency (at Blender's version) and removed again: only
@@ -87,33 +87,33 @@ def test_the_button_installs_into_the_extension_folder_and_it_imports_at_once(
 
 
 def test_the_folder_is_on_the_path_after_enabling_again(extension, probe_missing):
-    install = extension.module("operators.install")
+    installer = extension.module("runtime.installer")
     make_wheel(probe_missing, PROBE, "1.0", "ANSWER = 7\n")
     assert bpy.ops.udf_reconstruction.install_packages() == {'FINISHED'}
     extension.disable()
-    assert install.packages_folder() not in sys.path
+    assert installer.packages_folder() not in sys.path
     extension.enable()
-    assert install.packages_folder() in sys.path
-    assert extension.module("operators.dependencies").is_found(PROBE)
+    assert installer.packages_folder() in sys.path
+    assert extension.module("runtime.dependencies").is_found(PROBE)
 
 
 def test_a_failed_install_says_why_and_what_to_do(extension, probe_missing):
-    install = extension.module("operators.install")
+    installer = extension.module("runtime.installer")
     path_before = list(sys.path)
     with pytest.raises(RuntimeError) as error:  # no wheel of udfr-probe in the local index
         bpy.ops.udf_reconstruction.install_packages()
-    ok, message = install.last_result()
+    ok, message = installer.last_result()
     assert not ok and str(error.value).strip().endswith(message)
     assert message.startswith("Installing failed: No matching distribution found for "
                               "udfr-probe.")
     assert message.endswith("or install the extension zip made for your Blender.")
-    assert extension.module("operators.dependencies").missing_packages() == ["udfr-probe"]
+    assert extension.module("runtime.dependencies").missing_packages() == ["udfr-probe"]
     assert sys.path == path_before
 
 
 def test_progress_follows_pips_output(extension):
-    install = extension.module("operators.install")
-    job = install.Install(["scipy", "laspy[lazrs]"], "/nowhere", python=sys.executable)
+    installer = extension.module("runtime.installer")
+    job = installer.Install(["scipy", "laspy[lazrs]"], "/nowhere", python=sys.executable)
     seen = []
     for line in ["Collecting scipy", "  Downloading scipy-1.15.3-cp313-cp313-manylinux_2_17_"
                  "x86_64.whl (37.3 MB)", "Collecting numpy<2.5,>=1.23.5 (from scipy)",

@@ -52,7 +52,7 @@ def test_built_zip_ships_only_the_extension_and_installs(extension, tmp_path):
     assert _load_build_tool().main(["--no-wheels", "--output-dir", str(tmp_path)]) == 0
     (zip_path,) = tmp_path.glob(f"{EXTENSION_ID}-*.zip")
     names = zipfile.ZipFile(zip_path).namelist()
-    assert {"blender_manifest.toml", "__init__.py", "LICENSE", "operators/bridge.py",
+    assert {"blender_manifest.toml", "__init__.py", "LICENSE", "runtime/bridge.py",
             "engine/reconstruct.py", "scripts/batch_reconstruct.py"} <= set(names)
     assert not [n for n in names if n.startswith(("tests/", "docs/", "tools/", ".",
                                                   "lab/", "bench_results/",

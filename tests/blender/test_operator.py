@@ -137,18 +137,19 @@ def test_every_radius_mode_of_the_panel_makes_a_sphere(scene, extension, mode):
 
 def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
     reconstruct = extension.module("operators.reconstruct")
+    runtime_job = extension.module("runtime.job")
     engine_errors = extension.module("engine.errors")
     add_cloud("Sphere", sphere_points(20_000, 1.0))
     scene.udf_reconstruction.resolution = 128
     before = scene_state()
 
-    job = reconstruct.start_job(bpy.context)  # exactly what invoke() does
+    job = runtime_job.start_job(bpy.context)  # exactly what invoke() does
     job.start_thread()
     deadline = time.perf_counter() + 30
     while job.fraction == 0.0 and job.running and time.perf_counter() < deadline:
         time.sleep(0.05)
     assert job.running, "the job ended before it could be cancelled"
-    assert reconstruct.running_job() is job
+    assert runtime_job.running_job() is job
     assert not bpy.ops.udf_reconstruction.reconstruct.poll(), "one job at a time"
 
     asked = time.perf_counter()
@@ -163,7 +164,7 @@ def test_cancel_button_stops_the_worker_and_changes_nothing(scene, extension):
     assert reconstruct.finish_job(reports, bpy.context, job) == {'CANCELLED'}
     assert reports.messages == [({'INFO'}, "Reconstruction cancelled; nothing was changed.")]
     assert scene_state() == before
-    assert reconstruct.running_job() is None
+    assert runtime_job.running_job() is None
 
 
 def test_undo_removes_the_result(scene):

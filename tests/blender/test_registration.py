@@ -73,9 +73,29 @@ def test_panel_settings_become_the_engine_settings(scene, extension):
 
 def test_preferences_list_the_dependencies(extension):
     preferences = extension.module("ui.preferences")
-    dependencies = extension.module("operators.dependencies")
+    dependencies = extension.module("runtime.dependencies")
     rows = {name: version for name, version, _, _ in preferences.dependency_status()}
     assert rows["numpy"] is not None
     assert set(rows) >= {"scipy", "scikit-image"}
     # One table: the preferences list exactly what the Reconstruct button checks.
     assert list(rows) == [distribution for _, distribution, _, _ in dependencies.DEPENDENCIES]
+
+
+def _imported_packages(folder) -> set:
+    """The extension's top-level packages that the modules of ``folder`` import (relative
+    imports: ``from ..runtime import job`` -> runtime)."""
+    import ast
+    from pathlib import Path
+
+    found = set()
+    for path in (Path(__file__).resolve().parents[2] / folder).glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 2:
+                found.add((node.module or "").split(".")[0] or "extension root")
+    return found
+
+
+def test_the_panel_and_the_operators_do_not_import_each_other():
+    assert "operators" not in _imported_packages("ui")
+    assert "ui" not in _imported_packages("operators")
+    assert not {"ui", "operators"} & _imported_packages("runtime")

@@ -71,15 +71,15 @@ def test_a_new_setting_appears_in_the_generated_properties(scene, extension):
 
 def test_the_operator_reads_every_panel_value_into_the_engine_settings(scene, extension):
     settings = extension.module("engine.settings")
-    reconstruct = extension.module("operators.reconstruct")
+    runtime_job = extension.module("runtime.job")
     props = scene.udf_reconstruction
     props.radius, props.rho_min, props.outlier_ratio = 0.021, 0.55, 3.3
     props.udf_source, props.radius_mode, props.seed = "nearest", "learned", 12
     add_cloud("Scan", sphere_points(2000, 1.0))
-    job = reconstruct.start_job(bpy.context)
+    job = runtime_job.start_job(bpy.context)
     try:
         assert job.settings == settings.ReconstructSettings(
             radius=0.021, rho_min=0.55, outlier_ratio=3.3, udf_source="nearest",
             radius_mode="learned", seed=12), "single-precision floats arrive as typed"
     finally:
-        reconstruct._job = None  # the job was never started
+        runtime_job.end_job()  # the job was never started
