@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import WRITE_FORMATS
-from ..settings import DEVICES, MAX_SEED
+from ..settings import DEVICES
 
 
 def add_arguments(parser) -> None:
@@ -28,9 +28,6 @@ def add_arguments(parser) -> None:
                         help="keep both layers of the double cover")
     parser.add_argument("--min-component-faces", type=int, default=0,
                         help="drop output pieces with fewer faces (default 0: keep all)")
-    parser.add_argument("--seed", type=int, default=0,
-                        help=f"seed of the mesher, 0 to {MAX_SEED}; the mesher draws no random "
-                             f"numbers, so the mesh is the same for every seed (default 0)")
     parser.add_argument("--device", default="auto", choices=DEVICES,
                         help="where the optimisation runs: auto (a CUDA GPU when PyTorch sees "
                              "one, else numpy on the CPU), cpu or cuda (default auto)")
@@ -90,16 +87,13 @@ def run(args) -> int:
 
     check_outputs([args.output], [args.grid])
     check_device(args.device)
-    if not 0 <= args.seed <= MAX_SEED:
-        raise InputError(f"--seed must be a whole number from 0 to {MAX_SEED}, got {args.seed}")
     if args.iterations is not None and args.iterations < 0:
         raise InputError(f"--iterations must be >= 0, got {args.iterations}")
     if args.min_component_faces < 0:
         raise InputError(f"--min-component-faces must be >= 0, got {args.min_component_faces}")
     grid = load_grid(args.grid)
     settings = MeshingSettings(iso=parse_iso(args.iso, grid.spacing), cut=not args.no_cut,
-                               min_component_faces=args.min_component_faces, seed=args.seed,
-                               device=args.device)
+                               min_component_faces=args.min_component_faces, device=args.device)
     if args.iterations is not None:
         settings.iterations = args.iterations
 
