@@ -12,8 +12,10 @@ resident memory (``ru_maxrss``) is its own. Prints one table row per resolution:
 per stage (frame, band, udf, meshing, finish, total), the child's CPU seconds (user + system,
 whole process: a fairer figure on a shared machine), peak memory, band nodes, mean points per
 ball and the output's size; then Poisson's time and the ratio ours / Poisson; then the field's
-cost per network query, how much of it the radius policy took (the selector's or the curvature
-estimate's share: compare ``--radius-mode learned`` with ``fixed``), the mesher's stages and
+cost per network query (wall, and the process time of all threads with the band: steadier on
+a shared machine), how much of it the radius policy took (the selector's or the curvature
+estimate's share: compare ``--radius-mode learned`` with ``fixed``) and of that the parent
+ball's neighbour search (which also gives the backbone its patches), the mesher's stages and
 iterations, and the field's floor: network queries x multiply-adds per query / the
 multiply-add rate these cores reach on a large float32 matrix product, measured in the same run.
 Poisson needs open3d (requirements-bench.txt).
@@ -36,23 +38,34 @@ STAGES = ("outliers", "frame", "band", "udf", "meshing", "finish", "total", "cpu
 def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mode: str) -> dict:
     """Reconstruct ``path`` once in this process; the figures as a dict."""
     sys.path.insert(0, str(ROOT))
+    from engine import reconstruct as reconstruct_module
     from engine.io import read_point_cloud
-    from engine.reconstruct import reconstruct
     from engine.settings import ReconstructSettings
 
+    field_cpu = []  # the field's process time (band and network, every thread)
+    compute_udf_band = reconstruct_module.compute_udf_band
+
+    def timed_field(*args, **kwargs):
+        start = time.process_time()
+        band = compute_udf_band(*args, **kwargs)
+        field_cpu.append(time.process_time() - start)
+        return band
+
+    reconstruct_module.compute_udf_band = timed_field
     cloud = read_point_cloud(path)
     settings = ReconstructSettings(resolution=resolution, device=device, radius_mode=radius_mode)
-    result = reconstruct(cloud, settings, udf_source=udf_source)
+    result = reconstruct_module.reconstruct(cloud, settings, udf_source=udf_source)
     usage = resource.getrusage(resource.RUSAGE_SELF)
     stats = result.stats
     return {"resolution": resolution, "points": len(cloud), **result.timings,
-            "cpu_s": usage.ru_utime + usage.ru_stime,
+            "cpu_s": usage.ru_utime + usage.ru_stime, "field_cpu_s": sum(field_cpu),
             "peak_gib": usage.ru_maxrss / 2 ** 20,  # ru_maxrss is in KiB on Linux
             "band_nodes": stats["band_nodes"],
             "mean_patch_points": stats["mean_patch_points"], "vertices": stats["vertices"],
             "faces": stats["faces"], "device": stats["device"], "udf_source": udf_source,
             "network_queries": stats.get("network_queries", 0),
             "radius_s": stats.get("seconds_radius", 0.0),
+            "parent_s": stats.get("seconds_parent_ball", 0.0),
             "iterations": stats["meshing"].get("iterations", 0),
             "macs_per_query": _macs_per_query(stats["mean_patch_points"])}
 
@@ -140,11 +153,17 @@ def main(argv=None) -> int:
         totals.append((resolution, row["total"]))
         floors.append((resolution, row["network_queries"] * row["macs_per_query"]))
         queries = max(row["network_queries"], 1)
+        rest = max(row["udf"] - row["radius_s"], 1e-9)
         details.append(f"{resolution:>4} field: {row['network_queries']:,} network queries, "
-                       f"{1e6 * row['udf'] / queries:.1f} us per query, of which radius policy "
+                       f"{1e6 * row['udf'] / queries:.1f} us per query "
+                       f"({1e6 * row['field_cpu_s'] / queries:.1f} us of process time per query "
+                       f"with the band, all threads), of which radius policy "
                        f"{1e6 * row['radius_s'] / queries:.1f} us: it adds "
-                       f"{100 * row['radius_s'] / max(row['udf'] - row['radius_s'], 1e-9):.0f}% "
-                       f"to the rest of the field's time")
+                       f"{100 * row['radius_s'] / rest:.0f}% to the rest of the field's time "
+                       f"(its parent-ball neighbour search, whose lists also give the backbone "
+                       f"its patches: {1e6 * row['parent_s'] / queries:.1f} us per query; the "
+                       f"policy without it adds "
+                       f"{100 * (row['radius_s'] - row['parent_s']) / rest:.0f}%)")
     if not args.no_poisson:
         child = subprocess.run([sys.executable, __file__, "--poisson-child", "--input", args.input],
                                capture_output=True, text=True, cwd=ROOT)

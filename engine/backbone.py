@@ -27,6 +27,13 @@ Two implementations of the same forward pass read the same weights file (the for
 :mod:`engine.weights_file`): :class:`engine.backbone_torch.UDFBackbone` (torch, for training and
 GPU inference) and :class:`NumpyBackbone` (pure numpy, for Blender). This module never imports
 torch itself: the torch network is imported when it is asked for.
+
+The numpy pass runs in float32, the geometric features' sums over the points too (their 3 x 3
+algebra per patch in float64). It copies each patch's first point into its padding rows, so that
+the max pools need no mask (a copy's features equal the point's), folds the first layer's bias
+into its product and splits the pooled layers' weights by input block instead of concatenating
+inputs. tests/engine/test_backbone_reference.py holds it to a float64 evaluation of the
+masked forward pass above within 1e-4 of r on the owl's patches.
 """
 
 from pathlib import Path
@@ -55,20 +62,27 @@ def geometric_feature_count(config: Dict) -> int:
 
 # ----------------------------------------------------------------------------- features (numpy)
 
-def _plane_distance_np(rel: np.ndarray, weights: np.ndarray, alphas) -> list:
-    """Centroid norm, RMS spread and regularised plane distances for one weighting (float64).
+def _plane_distance_np(rel_t: np.ndarray, weights: np.ndarray, alphas) -> list:
+    """Centroid norm, RMS spread and regularised plane distances, per weighting.
 
-    rel (B, N, 3) float64, weights (B, N) float64 summing to 1 per row (0 on padding).
+    rel_t (3, B, N) float32 (the patch points by coordinate), weights (W, B, N) float32, each
+    row summing to 1 (0 on padding). Returns 2 + len(alphas) arrays of shape (W, B), float64.
+    The sums over the points (centroid, covariance) run in float32; the 3 x 3 algebra runs in
+    float64 per patch (the regularisation keeps (cov + eps I) within a condition number of
+    about 1 / alpha).
     """
-    c = np.einsum("bn,bnk->bk", weights, rel)
-    d = rel - c[:, None, :]
-    cov = np.einsum("bn,bni,bnj->bij", weights, d, d)
+    c = np.einsum("kbn,wbn->wkb", rel_t, weights)                      # (W, 3, B)
+    d = rel_t[None] - c[..., None]                                     # (W, 3, B, N)
+    cov = np.einsum("wibn,wjbn->wbij", d * weights[:, None], d).astype(np.float64)
+    c = c.transpose(0, 2, 1).astype(np.float64).reshape(-1, 3)
+    cov = cov.reshape(-1, 3, 3)
+    shape = weights.shape[:2]
     trace = cov[:, 0, 0] + cov[:, 1, 1] + cov[:, 2, 2]
     out = [np.sqrt(np.sum(c * c, axis=1)), np.sqrt(trace)]
     for alpha in alphas:
         eps = alpha * trace + 1e-6
         out.append(np.sqrt(np.maximum(eps * _quadratic_inverse(cov, eps, c, np), 0.0)))
-    return out
+    return [o.reshape(shape) for o in out]
 
 
 def _quadratic_inverse(cov, eps, c, xp):
@@ -89,29 +103,83 @@ def _quadratic_inverse(cov, eps, c, xp):
     return quad / det
 
 
-def geometric_features_np(rel: np.ndarray, mask: np.ndarray, config: Dict) -> np.ndarray:
-    """(B, F) float32 rotation- and order-invariant features of patches (see module doc)."""
-    rel64 = rel.astype(np.float64)
-    m = mask.astype(np.float64)
-    dist = np.sqrt(np.sum(rel64 * rel64, axis=2))
-    padded = np.where(mask, dist, 1.0)
+def geometric_features_np(rel: np.ndarray, mask: np.ndarray, config: Dict,
+                          dist: Optional[np.ndarray] = None) -> np.ndarray:
+    """(B, F) float32 rotation- and order-invariant features of patches (see module doc).
+
+    Per-point work in float32, per-patch 3 x 3 algebra in float64 (:func:`_plane_distance_np`);
+    within 1e-6 of a float64 evaluation on patches of the contract. ``dist``: the rows' norms
+    (B, N) float32 when the caller has them.
+    """
+    rel = np.asarray(rel, dtype=np.float32)
+    mask = np.asarray(mask, dtype=bool)
+    m = mask.astype(np.float32)
+    if dist is None:
+        dist = np.sqrt(np.einsum("bnk,bnk->bn", rel, rel))
+    padded = np.where(mask, dist, np.float32(1.0))
     k = config["smallest"]
-    smallest = np.sort(padded, axis=1)[:, :k]
+    if padded.shape[1] > 1 and not np.all(padded[:, 1:] >= padded[:, :-1]):
+        padded_sorted = np.sort(padded, axis=1)      # rows not nearest first (the contract's order)
+    else:
+        padded_sorted = padded
+    smallest = padded_sorted[:, :k].astype(np.float64)
     if smallest.shape[1] < k:                     # fewer rows than k: missing distances are 1 (= r)
         smallest = np.concatenate([smallest, np.ones((len(smallest), k - smallest.shape[1]))], axis=1)
     dmin = smallest[:, 0]
     feats = [smallest[:, j] for j in range(k)]
-    for tau in config["softmin_taus"]:
-        s = np.sum(m * np.exp(-(padded - dmin[:, None]) / tau), axis=1)
-        feats.append(dmin - tau * np.log(s))
+    taus = np.asarray(config["softmin_taus"], dtype=np.float64)
+    below = dmin.astype(np.float32)[:, None] - padded                     # <= 0
+    scaled = below[None] * (1.0 / taus).astype(np.float32)[:, None, None]   # (T, B, N)
+    s = np.einsum("tbn,bn->tb", np.exp(scaled), m).astype(np.float64)
+    feats.extend(dmin - taus[:, None] * np.log(s))
     count = m.sum(axis=1)
-    feats.append(count / 64.0)
-    uniform = m / count[:, None]
-    gauss = m * np.exp(-(padded / config["gauss_sigma"]) ** 2)
-    gauss = gauss / gauss.sum(axis=1, keepdims=True)
-    for w in (uniform, gauss):
-        feats.extend(_plane_distance_np(rel64, w, config["plane_alphas"]))
+    feats.append(count.astype(np.float64) / 64.0)
+    weights = np.empty((2,) + m.shape, dtype=np.float32)                  # uniform, Gaussian
+    np.divide(m, count[:, None], out=weights[0])
+    scaled = padded * np.float32(1.0 / config["gauss_sigma"])
+    np.exp(-(scaled * scaled), out=weights[1])
+    weights[1] *= m
+    weights[1] /= weights[1].sum(axis=1, keepdims=True)
+    planes = _plane_distance_np(np.ascontiguousarray(rel.transpose(2, 0, 1)), weights,
+                                config["plane_alphas"])
+    for w in range(2):
+        feats.extend(p[w] for p in planes)
     return np.stack(feats, axis=1).astype(np.float32)
+
+
+def max_over_points(x: np.ndarray) -> np.ndarray:
+    """(B, N, C) -> (B, C): the maximum over axis 1, by halving (two halves at a time,
+    overlapping by one row when N is odd: max is idempotent). Exact; each step is one
+    element-wise maximum over long contiguous runs, where numpy's reduction over a middle axis
+    loops row by row."""
+    while x.shape[1] > 1:
+        half = (x.shape[1] + 1) // 2
+        x = np.maximum(x[:, :half], x[:, x.shape[1] - half:])
+    return x[:, 0]
+
+
+class _Zeros:
+    """A shared read-only buffer of float32 zeros for ReLUs: ``np.maximum(x, 0)`` takes numpy's
+    scalar-broadcast loop, which is not vectorised; ``np.maximum(x, zeros)`` with an array of
+    x's shape takes the vectorised one (same values)."""
+
+    def __init__(self):
+        self.buffer = np.zeros(0, dtype=np.float32)
+
+    def like(self, x: np.ndarray) -> np.ndarray:
+        if self.buffer.size < x.size:
+            buffer = np.zeros(max(x.size, 2 * self.buffer.size), dtype=np.float32)
+            buffer.flags.writeable = False
+            self.buffer = buffer
+        return self.buffer[:x.size].reshape(x.shape)
+
+
+ZEROS = _Zeros()
+
+
+def relu_(x: np.ndarray) -> np.ndarray:
+    """max(x, 0) in place on a float32 array; returns x."""
+    return np.maximum(x, ZEROS.like(x), out=x)
 
 
 # ----------------------------------------------------------------------------- numpy network
@@ -124,46 +192,77 @@ class NumpyBackbone:
         # torch Linear stores (out, in); keep (in, out) for x @ W.
         self.p = {k: (np.ascontiguousarray(v.T) if v.ndim == 2 else v).astype(np.float32)
                   for k, v in params.items()}
+        p, hdim = self.p, self.config["hidden"]
+        # the first layer reads [rel, |rel|, 1]: its bias is the weight of the constant input
+        self.enc0 = np.ascontiguousarray(np.vstack([p["enc0.weight"], p["enc0.bias"][None]]))
+        # the pooled features' layers split by input block (no concatenation per batch)
+        q0 = p["query0.weight"]
+        self.query0 = (q0[:hdim], q0[hdim:2 * hdim], q0[2 * hdim:])
+        h0 = p["head0.weight"]
+        ctx = 2 * hdim + self.config["heads"] * hdim
+        self.head0 = (h0[:2 * hdim], h0[2 * hdim:ctx], h0[ctx:])
 
     def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
-        return x @ self.p[name + ".weight"] + self.p[name + ".bias"]
+        y = x @ self.p[name + ".weight"]
+        y += self.p[name + ".bias"]
+        return y
 
     def _forward(self, rel: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """UDF / r of (b, n, 3) float32 patches with (b, n) bool masks (one chunk)."""
         cfg, p = self.config, self.p
+        rel = np.asarray(rel, dtype=np.float32)
+        mask = np.asarray(mask, dtype=bool)
         b, n, _ = rel.shape
         hdim, heads = cfg["hidden"], cfg["heads"]
-        geo = geometric_features_np(rel, mask, cfg)
-        dist = np.sqrt(np.sum(rel * rel, axis=2, keepdims=True))
-        x = np.concatenate([rel, dist], axis=2).reshape(b * n, 4)
-        t = self._linear(x, "enc0")
-        np.maximum(t, 0, out=t)
-        h1 = self._linear(t, "enc1")                                   # (b*n, H)
-        # 0 on real rows, -inf on padding: added before a max so padding never wins.
-        pad = np.where(mask, np.float32(0), np.float32(-np.inf)).reshape(b, n, 1)
-        g1 = (h1.reshape(b, n, hdim) + pad).max(axis=1)
-        t = np.maximum(h1, 0) @ p["enc2a.weight"]
-        t = t.reshape(b, n, hdim)
-        t += (g1 @ p["enc2b.weight"] + p["enc2b.bias"])[:, None, :]
-        np.maximum(t, 0, out=t)
-        h2 = self._linear(t.reshape(b * n, hdim), "enc3")
+        # Padding rows become copies of the patch's first point: every per-point feature of a
+        # copy equals that point's, so the max pools need no mask (the mean and the attention
+        # keep theirs).
+        if not mask.all():
+            first = rel[np.arange(b), mask.argmax(axis=1)]
+            rel = np.where(mask[:, :, None], rel, first[:, None, :])
+        x = np.empty((b, n, 5), dtype=np.float32)
+        x[..., :3] = rel
+        dist = x[..., 3]
+        np.sqrt(np.einsum("bnk,bnk->bn", rel, rel), out=dist)
+        x[..., 4] = 1.0
+        geo = geometric_features_np(rel, mask, cfg, dist)
+        t = x.reshape(b * n, 5) @ self.enc0                              # enc0 with its bias
+        relu_(t)
+        h1 = self._linear(t, "enc1")                                     # (b*n, H)
+        g1 = max_over_points(h1.reshape(b, n, hdim))
+        np.maximum(h1, ZEROS.like(h1), out=t)
+        u = t @ p["enc2a.weight"]
+        u = u.reshape(b, n, hdim)
+        u += (g1 @ p["enc2b.weight"] + p["enc2b.bias"])[:, None, :]
+        relu_(u)
+        h2 = np.matmul(u.reshape(b * n, hdim), p["enc3.weight"], out=t)
+        h2 += p["enc3.bias"]
         h2 += h1
         h2 = h2.reshape(b, n, hdim)
         m = mask.astype(np.float32)
         count = m.sum(axis=1, keepdims=True)
-        pmax = (h2 + pad).max(axis=1)
+        pmax = max_over_points(h2)
         pmean = np.matmul(m[:, None, :], h2)[:, 0, :] / count
-        pooled = np.concatenate([pmax, pmean, geo], axis=1)
-        query = self._linear(np.maximum(self._linear(pooled, "query0"), 0), "query1")
-        query = query.reshape(b, heads, hdim) * np.float32(1.0 / np.sqrt(hdim))
-        scores = np.matmul(query, h2.transpose(0, 2, 1))              # (b, heads, n)
-        scores += pad.reshape(b, 1, n)
+        w = self.query0
+        query = pmax @ w[0]
+        query += pmean @ w[1]
+        query += geo @ w[2]
+        query += p["query0.bias"]
+        query = self._linear(relu_(query), "query1")
+        query = query.reshape(b, heads, hdim)
+        query *= np.float32(1.0 / np.sqrt(hdim))
+        scores = np.matmul(query, h2.transpose(0, 2, 1))                # (b, heads, n)
+        scores += np.where(mask, np.float32(0), np.float32(-np.inf))[:, None, :]
         scores -= scores.max(axis=2, keepdims=True)
         np.exp(scores, out=scores)
         scores /= scores.sum(axis=2, keepdims=True)
-        ctx = np.matmul(scores, h2).reshape(b, heads * hdim)         # (b, heads * H)
-        z = np.concatenate([pmax, pmean, ctx, geo], axis=1)
-        z = np.maximum(self._linear(z, "head0"), 0)
-        z = np.maximum(self._linear(z, "head1"), 0)
+        ctx = np.matmul(scores, h2).reshape(b, heads * hdim)           # (b, heads * H)
+        w = self.head0
+        z = np.concatenate([pmax, pmean], axis=1) @ w[0]
+        z += ctx @ w[1]
+        z += geo @ w[2]
+        z += p["head0.bias"]
+        z = relu_(self._linear(relu_(z), "head1"))
         z = self._linear(z, "head2")[:, 0]
         return np.logaddexp(z, np.float32(0)).astype(np.float32)      # softplus
 

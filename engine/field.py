@@ -32,7 +32,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from .cpu_threads import cpu_threads, run_in_threads
+from .cpu_threads import cpu_threads, map_in_threads, run_in_threads
 from .devices import resolve_device
 from .errors import InputError
 from .udf_grid import UDFGrid
@@ -81,7 +81,11 @@ class BandField:
         ``mean_patch_points`` (over the balls the network saw),
         ``udf_source``, ``device`` (``cpu``, ``cuda``, ``custom`` predictor or ``none``),
         ``seconds_band``, ``seconds_udf``, ``seconds_radius`` (the part of ``seconds_udf``
-        spent choosing radii: the selector or the curvature estimate).
+        spent choosing radii, the selector or the curvature estimate with the parent ball's
+        neighbour search: ``seconds_udf`` times the radius policy's share of the batches'
+        time, as the batches run on several threads at once), ``seconds_parent_ball`` (the
+        part of ``seconds_radius`` spent on the parent ball's neighbour search, whose lists
+        also give the backbone its patches).
     """
 
     grid: UDFGrid
@@ -264,6 +268,8 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     else:
         values = nearest.astype(np.float32)
     stats["seconds_udf"] = time.perf_counter() - started
+    stats["seconds_radius"] = stats.pop("radius_share", 0.0) * stats["seconds_udf"]
+    stats["seconds_parent_ball"] = stats.pop("parent_share", 0.0) * stats["seconds_udf"]
     grid = UDFGrid.from_band(indices, values, shape, origin, spacing, far_value=band_radius)
     progress(1.0, "field done")
     return BandField(grid, stats)
@@ -272,7 +278,12 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
 def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.ndarray,
                     settings: ReconstructSettings, predictor: Optional[Predictor],
                     progress: ProgressFn, cancel: Optional[CancelFn], stats: dict) -> np.ndarray:
-    """Backbone UDF (unit frame) at each band query: (M,) float32."""
+    """Backbone UDF (unit frame) at each band query: (M,) float32.
+
+    The queries go in batches; on the CPU the batches run on one thread per core
+    (:mod:`engine.cpu_threads`), each batch whole: its neighbour search, radius policy and
+    backbone. A batch is cut and computed the same way on any number of threads.
+    """
     if predictor is None:
         device = resolve_device(settings.device)
         predictor = backbone_predictor(device)
@@ -284,11 +295,8 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     group = batch if on_gpu else TRIM_GROUP  # a GPU prefers few large calls
     threads = 1 if on_gpu else cpu_threads()
     values = np.empty(len(queries), dtype=np.float32)
-    sparse = 0
-    total_points = 0
-    seconds_radius = 0.0
-    stats["widened_balls"] = 0
-    for start in range(0, len(queries), batch):
+
+    def one_batch(start: int) -> dict:
         check_cancel(cancel)
         stop = min(start + batch, len(queries))
         mark = time.perf_counter()
@@ -297,30 +305,43 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
         parent = None
         if reads_parent_ball(settings):
             parent = parent_ball(settings, tree, batch_queries)
+        seconds_parent = time.perf_counter() - mark
         radii = radii_for_queries(settings, tree, points, batch_queries, parent)
-        seconds_radius += time.perf_counter() - mark
+        seconds_radius = time.perf_counter() - mark
         if parent is None:
             rel, mask, counts = gather_patches(tree, points, batch_queries, radii, MAX_POINTS)
         else:
             rel, mask, counts = patches_from_neighbours(points, batch_queries, parent, radii,
                                                         MAX_POINTS)
+        widened = 0
         few = np.flatnonzero(counts < MIN_PATCH_POINTS)
         if len(few):
             grown = widen_sparse_balls(tree, points, batch_queries[few], radii[few])
             rel[few], mask[few], counts[few], radii[few], widened = grown
-            stats["widened_balls"] += widened
         chunk = nearest[start:stop].astype(np.float32)
         seen = np.flatnonzero(counts >= MIN_PATCH_POINTS)
         chunk[seen] = predict_trimmed(predictor, rel[seen], mask[seen], counts[seen],
-                                       group, cancel, threads) * radii[seen]
+                                       group, cancel) * radii[seen]
         values[start:stop] = chunk
-        sparse += len(counts) - len(seen)
-        total_points += int(counts[seen].sum())
-        progress(0.1 + 0.9 * stop / len(queries),
-                 f"network UDF: {stop:,} / {len(queries):,} queries")
-    stats["sparse_balls"] = sparse
-    stats["seconds_radius"] = seconds_radius
-    stats["mean_patch_points"] = total_points / max(len(queries) - sparse, 1)
+        return {"count": stop - start, "sparse": len(counts) - len(seen), "widened": widened,
+                "points": int(counts[seen].sum()), "seconds_radius": seconds_radius,
+                "seconds_parent": seconds_parent, "seconds": time.perf_counter() - mark}
+
+    totals = {"sparse": 0, "widened": 0, "points": 0, "seconds_radius": 0.0,
+              "seconds_parent": 0.0, "seconds": 0.0}
+    done = 0
+    for result in map_in_threads(one_batch, range(0, len(queries), batch), threads):
+        for key in totals:
+            totals[key] += result[key]
+        done += result["count"]
+        progress(0.1 + 0.9 * done / len(queries),
+                 f"network UDF: {done:,} / {len(queries):,} queries")
+    stats["sparse_balls"] = totals["sparse"]
+    stats["widened_balls"] = totals["widened"]
+    # the radius policy's share of the batches' time (on several threads their times overlap)
+    stats["radius_share"] = totals["seconds_radius"] / max(totals["seconds"], 1e-12)
+    stats["parent_share"] = totals["seconds_parent"] / max(totals["seconds"], 1e-12)
+    stats["mean_patch_points"] = totals["points"] / max(len(queries) - totals["sparse"], 1)
     return values
 
 

@@ -19,12 +19,14 @@ costs a few microseconds per query.
 
 import numpy as np
 
+from .cpu_threads import run_in_threads
+
 MIN_POINTS = 7       # a quadric has 6 coefficients
 _CHUNK = 512         # queries per vectorised step: the arrays stay in cache
 _RIDGE = 1e-6        # keeps the quadric's normal equations solvable on degenerate patches
 
 
-def patch_roughness(rel: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def patch_roughness(rel: np.ndarray, mask: np.ndarray, threads: int = 1) -> np.ndarray:
     """[thickness, quadric residual] per patch, both in units of the patch radius; (Q, 2) float32.
 
     Parameters
@@ -32,15 +34,19 @@ def patch_roughness(rel: np.ndarray, mask: np.ndarray) -> np.ndarray:
     rel : (Q, M, 3) patch points relative to their query, divided by the radius (the patch
         contract of :mod:`engine.patches`)
     mask : (Q, M) bool, which entries of ``rel`` are points (the rest is padding)
+    threads : CPU threads over the chunks of patches (each patch's answer is the same either way)
     """
     mask = np.asarray(mask, dtype=bool)
     counts = mask.sum(axis=1)
     out = np.zeros((len(rel), 2), dtype=np.float32)
     rows = np.flatnonzero(counts >= MIN_POINTS)
-    for start in range(0, len(rows), _CHUNK):
+
+    def fit(start: int) -> None:
         part = rows[start:start + _CHUNK]
         out[part] = _roughness(np.asarray(rel[part], dtype=np.float32),
                                mask[part].astype(np.float32))
+
+    run_in_threads(fit, range(0, len(rows), _CHUNK), threads)
     return out
 
 

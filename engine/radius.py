@@ -10,6 +10,7 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
+from .cpu_threads import cpu_threads
 from .devices import resolve_device
 from .errors import InputError
 from .patches import Neighbours
@@ -38,9 +39,10 @@ def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
     """The selector network's radius per query, in [rho_min R, rho_max R]: (Q,) float64."""
     from .selector import predict_radii
 
-    selector = _shipped_selector(resolve_device(settings.device))
-    return predict_radii(selector, tree, points, queries, settings.parent_radius,
-                         settings.rho_min, settings.rho_max, neighbours)
+    device = resolve_device(settings.device)
+    return predict_radii(_shipped_selector(device), tree, points, queries, settings.parent_radius,
+                         settings.rho_min, settings.rho_max, neighbours,
+                         cpu_threads() if device == "cpu" else 1)
 
 
 @functools.lru_cache(maxsize=2)

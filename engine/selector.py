@@ -29,6 +29,8 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
+from .backbone import ZEROS, max_over_points, relu_
+from .cpu_threads import run_in_threads
 from .patch_roughness import patch_roughness
 from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
                       patches_from_neighbours)
@@ -39,6 +41,9 @@ PARENT_POINTS = 128
 STRIDE = 4
 HISTOGRAM_BINS = 6
 EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2  # log count, histogram, roughness
+# Queries per numpy forward pass: their per-point activations (256 x about 10 points x 64
+# float32) stay in a core's cache between the layers.
+BATCH = 256
 
 DEFAULT_CONFIG = {
     "hidden": 32,      # H of the ResNet-PointNet
@@ -49,12 +54,13 @@ DEFAULT_CONFIG = {
 
 
 def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
-                    neighbours: Optional[Neighbours] = None,
+                    neighbours: Optional[Neighbours] = None, threads: int = 1,
                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the selector reads for each query.
 
     ``neighbours``, when given, are the queries' :func:`parent_neighbours` (the field computes
     them once for the selector and the backbone); otherwise they are looked up in ``tree``.
+    ``threads``: CPU threads for the roughness fits (the answers do not depend on it).
 
     Returns
     -------
@@ -66,7 +72,7 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     if neighbours is None:  # chunk by chunk: the lists take 2 kB per query
         parts = [parent_features(tree, points, queries[start:start + QUERY_CHUNK], parent_radius,
                                  parent_neighbours(tree, queries[start:start + QUERY_CHUNK],
-                                                   parent_radius))
+                                                   parent_radius), threads)
                  for start in range(0, max(len(queries), 1), QUERY_CHUNK)]
         return tuple(np.concatenate(arrays) for arrays in zip(*parts))
     strided = Neighbours(neighbours.distance[:, :PARENT_POINTS:STRIDE],
@@ -74,14 +80,19 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     rel, mask, _ = patches_from_neighbours(points, queries, strided, parent_radius,
                                            PARENT_POINTS // STRIDE)
     distance = neighbours.distance[:, :PARENT_POINTS]
-    rows, columns = np.nonzero(distance <= parent_radius)
-    counts = np.bincount(rows, minlength=len(distance))
-    shell = (distance[rows, columns] / parent_radius * HISTOGRAM_BINS).astype(np.int64)
-    shell = np.minimum(shell, HISTOGRAM_BINS - 1)
-    hist = np.bincount(rows * HISTOGRAM_BINS + shell, minlength=len(distance) * HISTOGRAM_BINS)
-    hist = hist.reshape(-1, HISTOGRAM_BINS) / np.maximum(counts, 1)[:, None]
+    counts = np.count_nonzero(distance <= parent_radius, axis=1)
+    # a point's shell is floor(scaled), the last shell also taking scaled == HISTOGRAM_BINS
+    # (d = R); floor(scaled) < k exactly when scaled < k, so the points below each shell are
+    # counted without gathering them (points beyond R have scaled > HISTOGRAM_BINS)
+    scaled = distance / parent_radius * HISTOGRAM_BINS
+    below = np.empty((len(distance), HISTOGRAM_BINS + 1), dtype=np.int64)
+    below[:, 0] = 0
+    for k in range(1, HISTOGRAM_BINS):
+        below[:, k] = np.count_nonzero(scaled < k, axis=1)
+    below[:, HISTOGRAM_BINS] = counts
+    hist = np.diff(below, axis=1) / np.maximum(counts, 1)[:, None]
     log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)
-    roughness = patch_roughness(rel, mask)
+    roughness = patch_roughness(rel, mask, threads)
     extra = np.column_stack([log_count, hist, roughness]).astype(np.float32)
     return rel, mask, extra
 
@@ -107,73 +118,107 @@ class NumpySelector:
         self.config = dict(config)
         self.p = {k: (np.ascontiguousarray(v.T) if v.ndim == 2 else v).astype(np.float32)
                   for k, v in params.items()}
+        # The first layer reads [rel, 1] (its bias is the weight of the constant input). The
+        # first block's shortcut is linear in that layer's output, so it folds into the same
+        # product: [rel, 1] @ [pos | pos @ shortcut] gives both at once.
+        pos = np.vstack([params["pos.weight"].T, params["pos.bias"][None]]).astype(np.float64)
+        shortcut = pos @ params["block0.shortcut.weight"].T.astype(np.float64)
+        self.pos = np.hstack([pos, shortcut]).astype(np.float32)
 
     def _linear(self, x, name, bias=True):
         y = x @ self.p[name + ".weight"]
-        return y + self.p[name + ".bias"] if bias else y
+        if bias:
+            y += self.p[name + ".bias"]
+        return y
 
-    def _block(self, x, name):
-        """ResNet block: fc_1(relu(fc_0(relu(x)))) + shortcut(x)."""
-        t = self._linear(np.maximum(x, 0), name + ".fc0")
-        t = self._linear(np.maximum(t, 0), name + ".fc1")
-        return t + self._linear(x, name + ".shortcut", bias=False)
+    def _first_block(self, x):
+        """The first layer and the first ResNet block, fc_1(relu(fc_0(relu(pos)))) +
+        shortcut(pos), from x = [rel, 1] (b*n, 4)."""
+        both = x @ self.pos                                               # (b*n, 2H + H)
+        width = self.p["pos.weight"].shape[1]
+        pos = np.maximum(both[:, :width], ZEROS.like(both[:, :width]))
+        t = self._linear(pos, "block0.fc0")
+        t = self._linear(relu_(t), "block0.fc1")
+        t += both[:, width:]
+        return t
 
     def _pooled_block(self, x, pooled, name):
         """The block on [x, pooled] (b, n, 2H) without building it: each weight matrix is split
         into its x rows and its pooled rows, and the pooled part is computed once per patch."""
         b, n, h = x.shape
-        w0, ws = self.p[name + ".fc0.weight"], self.p[name + ".shortcut.weight"]
-        per_patch = np.maximum(pooled, 0) @ w0[h:] + self.p[name + ".fc0.bias"]   # (b, H)
-        t = (np.maximum(x, 0).reshape(b * n, h) @ w0[:h]).reshape(b, n, -1)
-        t = np.maximum(t + per_patch[:, None], 0).reshape(b * n, -1)
-        t = self._linear(t, name + ".fc1").reshape(b, n, -1)
-        t += (x.reshape(b * n, h) @ ws[:h]).reshape(b, n, -1)
-        t += (pooled @ ws[h:])[:, None]
+        p = self.p
+        w0, ws = p[name + ".fc0.weight"], p[name + ".shortcut.weight"]
+        per_patch = np.maximum(pooled, ZEROS.like(pooled)) @ w0[h:]         # (b, H)
+        per_patch += p[name + ".fc0.bias"]
+        x = x.reshape(b * n, h)
+        t = (np.maximum(x, ZEROS.like(x)) @ w0[:h]).reshape(b, n, -1)
+        t += per_patch[:, None]
+        t = relu_(t).reshape(b * n, -1) @ p[name + ".fc1.weight"]
+        t += x @ ws[:h]
+        t = t.reshape(b, n, -1)
+        per_patch = pooled @ ws[h:]
+        per_patch += p[name + ".fc1.bias"]
+        t += per_patch[:, None]
         return t
 
     def _forward(self, rel, mask, extra):
         b, n, _ = rel.shape
         h = self.config["hidden"]
-        pad = np.where(mask, np.float32(0), np.float32(-np.inf))[:, :, None]
-        net = self._linear(rel.reshape(b * n, 3), "pos")                  # (b*n, 2H)
-        net = self._block(net, "block0").reshape(b, n, h)                 # (b, n, H)
+        # Padding rows become copies of the patch's first point: every per-point feature of a
+        # copy equals that point's, so the max pools need no mask.
+        if not mask.all():
+            first = rel[np.arange(b), mask.argmax(axis=1)]
+            rel = np.where(mask[:, :, None], rel, first[:, None, :])
+        x = np.empty((b * n, 4), dtype=np.float32)
+        x[:, :3] = rel.reshape(b * n, 3)
+        x[:, 3] = 1.0
+        net = self._first_block(x).reshape(b, n, h)                       # (b, n, H)
         for k in range(1, self.config["blocks"]):
-            pooled = (net + pad).max(axis=1)                              # (b, H)
+            pooled = max_over_points(net)                                # (b, H)
             net = self._pooled_block(net, pooled, f"block{k}")            # (b, n, H)
-        pooled = (net + pad).max(axis=1)
-        code = self._linear(np.maximum(pooled, 0), "code")                # (b, 256)
+        pooled = max_over_points(net)
+        code = self._linear(np.maximum(pooled, ZEROS.like(pooled)), "code")   # (b, 256)
         extra = (extra - self.p["extra_mean"]) * self.p["extra_scale"]
         z = np.concatenate([code, extra], axis=1)
         for k in range(len(self.config["mlp"])):
-            z = np.maximum(self._linear(z, f"mlp{k}"), 0)
+            z = relu_(self._linear(z, f"mlp{k}"))
         z = self._linear(z, "out")[:, 0]
         return (0.5 * (1.0 + np.tanh(0.5 * z))).astype(np.float32)  # overflow-free sigmoid
 
-    def predict_unit(self, rel, mask, extra, batch_size: int = 512) -> np.ndarray:
+    def predict_unit(self, rel, mask, extra, batch_size: int = BATCH, threads: int = 1,
+                     ) -> np.ndarray:
         """s per query. Padding columns never change it (the pools are masked) but cost as much
-        as points: queries go in order of point count, each batch cut to its largest count."""
+        as points: queries go in order of point count, each batch cut to its largest count.
+        With ``threads`` > 1 the batches run on that many threads (:mod:`engine.cpu_threads`);
+        each batch's answer is the same either way."""
         rel = np.asarray(rel, dtype=np.float32)
         mask = np.asarray(mask, dtype=bool)
+        extra = np.asarray(extra, dtype=np.float32)
         out = np.empty(rel.shape[0], dtype=np.float32)
-        for batch, width in groups_by_count(mask.sum(axis=1), batch_size):
+
+        def run(item):
+            batch, width = item
             out[batch] = self._forward(rel[batch, :width], mask[batch, :width], extra[batch])
+
+        run_in_threads(run, groups_by_count(mask.sum(axis=1), batch_size), threads)
         return out
 
 
 def predict_radii(selector, tree, points: np.ndarray, queries: np.ndarray, parent_radius: float,
                   rho_min: float, rho_max: float,
-                  neighbours: Optional[Neighbours] = None) -> np.ndarray:
+                  neighbours: Optional[Neighbours] = None, threads: int = 1) -> np.ndarray:
     """Per-query radii r_hat = rho * R with rho in [rho_min, rho_max]; (Q,) float64, unit frame.
 
     A query whose parent ball is empty keeps rho_max (the backbone treats it as far anyway).
-    ``neighbours``: the queries' :func:`parent_neighbours`, when already at hand.
+    ``neighbours``: the queries' :func:`parent_neighbours`, when already at hand. ``threads``:
+    CPU threads for the roughness fits and the network (the answers do not depend on it).
     """
-    rel, mask, extra = parent_features(tree, points, queries, parent_radius, neighbours)
+    rel, mask, extra = parent_features(tree, points, queries, parent_radius, neighbours, threads)
     s = np.ones(len(queries), dtype=np.float64)
     has_points = mask.any(axis=1)
     if np.any(has_points):
         s[has_points] = selector.predict_unit(rel[has_points], mask[has_points],
-                                              extra[has_points])
+                                              extra[has_points], threads=threads)
     return (rho_min + (rho_max - rho_min) * s) * parent_radius
 
 
@@ -197,7 +242,9 @@ class TorchSelector:
         self.module = module
         self.device = device
 
-    def predict_unit(self, rel, mask, extra, batch_size: int = 65536) -> np.ndarray:
+    def predict_unit(self, rel, mask, extra, batch_size: int = 65536, threads: int = 1,
+                     ) -> np.ndarray:
+        """s per query (``threads`` is the CPU selector's and is ignored here)."""
         import torch
 
         out = np.empty(len(rel), dtype=np.float32)
