@@ -75,24 +75,29 @@ def _one_thread() -> None:
 
 def _in_processes(task, jobs, workers, progress, cancel) -> List:
     import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
 
-    pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_one_thread)
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_one_thread)
     try:
-        pending = [pool.apply_async(task, job) for job in jobs]
-        done = 0
-        while done < len(pending):
+        pending = [pool.submit(task, *job) for job in jobs]
+        while True:
             check_cancel(cancel)
-            pending[done].wait(POLL_SECONDS)
-            while done < len(pending) and pending[done].ready():
-                done += 1
-                progress(done / len(pending), f"{done} of {len(pending)} tiles done "
-                                              f"on {workers} workers")
-        results = [item.get() for item in pending]
-        pool.close()
-        return results
+            done = sum(future.done() for future in pending)
+            progress(done / len(pending), f"{done} of {len(pending)} tiles done on "
+                                          f"{workers} workers")
+            if done == len(pending):
+                return [future.result() for future in pending]
+            wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
+    except BrokenProcessPool:
+        raise InputError("the worker processes stopped before finishing (out of memory, or a "
+                         "script that calls reconstruct() outside `if __name__ == "
+                         "\"__main__\":`); run with workers=1 to use this process only") from None
     finally:
-        pool.terminate()
-        pool.join()
+        for process in list(getattr(pool, "_processes", {}).values()):
+            process.terminate()  # a cancel or an error: stop the tiles still running
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _on_dask(task, jobs, workers, scheduler, progress, cancel) -> List:

@@ -2,13 +2,14 @@
 
 import bpy
 
+from ..engine.detail import cell_size
 from ..runtime import bridge, dependencies
 from ..runtime.job import running_job
 from .properties import DEVICE_ITEMS, scene_settings
 
 
 def _length(context, fraction: float, extent: float) -> str:
-    """A unit-frame length as a real length of the active object, in the scene's units."""
+    """``fraction`` of ``extent`` (a length of the active object) in the scene's units."""
     units = context.scene.unit_settings
     return bpy.utils.units.to_string(units.system, 'LENGTH', fraction * extent * units.scale_length,
                                      precision=3)
@@ -71,6 +72,9 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
                          icon='OUTLINER_OB_POINTCLOUD')
         count = target.count
         extent = bridge.world_extent(target.source) if count else 0.0
+        # radii are fractions of Resolution cells: the longest side unless the cells are finer
+        voxel, cells, capped = cell_size(count, extent, props) if extent else (0.0, 0.0, False)
+        scale = voxel * props.resolution
 
         body = layout.column()
         body.enabled = job is None
@@ -79,7 +83,7 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
         if props.radius_mode == 'fixed':
             body.prop(props, "radius")
             if extent:
-                body.label(text=f"Radius {_length(context, props.radius, extent)}")
+                body.label(text=f"Radius {_length(context, props.radius, scale)}")
         else:
             body.prop(props, "parent_radius")
             column = body.column(align=True)
@@ -88,11 +92,13 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
             if extent:
                 low = props.rho_min * props.parent_radius
                 high = props.rho_max * props.parent_radius
-                body.label(text=f"Radius {_length(context, low, extent)} "
-                                f"to {_length(context, high, extent)}")
-        body.prop(props, "resolution")
+                body.label(text=f"Radius {_length(context, low, scale)} "
+                                f"to {_length(context, high, scale)}")
+        body.prop(props, "detail")
+        body.prop(props, "voxel_size" if props.detail == 'voxel_size' else "resolution")
         if extent:
-            body.label(text=f"Cell {_length(context, 1.0 / props.resolution, extent)}")
+            text = f"Cell {_length(context, voxel, 1.0)} ({cells:,.0f} cells)"
+            body.label(text=text + (", auto's finest" if capped else ""))
         _draw_device(body, props)
         body.prop(props, "hide_source")
 
@@ -130,6 +136,7 @@ class UDFR_PT_advanced(bpy.types.Panel):
         props = scene_settings(context.scene)
         layout.prop(props, "seed")
         layout.prop(props, "min_component_faces")
+        layout.prop(props, "tile_cells")
         layout.prop(props, "outliers")
         row = layout.row()
         row.enabled = props.outliers != "keep"

@@ -19,6 +19,8 @@ def test_every_setting_is_a_panel_property_with_its_label_default_and_range(scen
         if info.choices:
             assert [i.identifier for i in prop.enum_items] == list(info.values)
             assert prop.default == item.default
+        elif isinstance(item.default, str):
+            assert prop.default == item.default, item.name
         else:
             assert abs(prop.default - item.default) < 1e-6, item.name
         if info.low is not None:
