@@ -131,3 +131,14 @@ def test_an_unreachable_scheduler_is_a_clear_error():
     with pytest.raises(InputError, match="could not reach the Dask scheduler"):
         reconstruct(cloud, dict(detail="resolution", resolution=32, tile_cells=24,
                                 scheduler="tcp://127.0.0.1:9"))
+
+
+@pytest.mark.parametrize("mode", ["curvature", "learned"])
+def test_every_radius_mode_runs_in_tiles(mode):
+    cloud = hemisphere_cloud(8_000, seed=3)
+    settings = dict(detail="resolution", resolution=48, radius_mode=mode, workers=1)
+    whole = reconstruct(cloud, settings)
+    tiled = reconstruct(cloud, dict(settings, tile_cells=24))
+    assert tiled.stats["tiles"] >= 4
+    assert surface_error(tiled.mesh.vertices).mean() < 1.05 * surface_error(
+        whole.mesh.vertices).mean() + 1e-5
