@@ -53,7 +53,9 @@ class ReconstructResult:
         ``queries`` (backbone evaluations), ``sparse_balls``, ``mean_patch_points``,
         ``udf_source``, ``device``, ``iso`` (working frame), ``voxel_size`` (cell length, input units), ``cells`` (along the
         longest side), ``components`` (pieces of the output),
-        ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers).
+        ``vertices``, ``faces``, ``meshing`` (the mesher's own numbers). Made in tiles
+        (:mod:`.tiles`): ``tiles``, ``tile_cells`` and ``workers`` too, the field's numbers summed
+        over the tiles, the stitching's in ``meshing``, ``timings["tiles"]`` for field and mesh.
     """
 
     mesh: Mesh
@@ -137,7 +139,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
             points_unit, settings, meshing_settings(settings), tile_cells, udf_source,
             sub_progress(progress, 0.01, _MESH_END), cancel)
         timings["tiles"] = time.perf_counter() - mark
-        meshed = MeshingResult(Mesh(vertices, faces), float("nan"), {}, [], mesh_stats)
+        meshed = MeshingResult(Mesh(vertices, faces), mesh_stats.pop("iso"), {}, [], mesh_stats)
     else:
         band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
                                 cancel, udf_source=udf_source, tree=tree)

@@ -305,7 +305,7 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
     meshed = extract_surface(band.grid, meshing, sub_progress(progress, 0.6, 1.0), cancel)
     vertices, faces = keep_core(np.asarray(meshed.mesh.vertices, np.float64),
                                 np.asarray(meshed.mesh.faces, np.int64), tile)
-    return vertices, faces, band.stats
+    return vertices, faces, {**band.stats, "iso": float(meshed.iso)}
 
 
 def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
@@ -318,8 +318,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     vertices : (n, 3) float64; faces : (m, 3) int64
     field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
         ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``
-    mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``holes_closed``)
-        and the clean-up's
+    mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
+        ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
     from .meshing.cleanup import clean_mesh
     from .tile_runners import available_cores
@@ -339,7 +339,9 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
     patch_points = 0.0
     device = "none"
+    isos = []
     for vertices, faces, band in results:
+        isos.append(band["iso"])
         pieces.append((vertices, faces))
         for key in sums:
             sums[key] += int(band.get(key, 0))
@@ -354,6 +356,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                    "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
                    "udf_source": udf_source}
-    mesh_stats = {**stitched, **{f"cleanup_{k}": v for k, v in counts.items()}}
+    mesh_stats = {**stitched, **{f"cleanup_{k}": v for k, v in counts.items()},
+                  "iso": float(np.median(isos)) if isos else 0.0}
     progress(1.0, "tiles stitched")
     return vertices, faces.astype(np.int64), field_stats, mesh_stats
