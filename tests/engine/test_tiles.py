@@ -142,3 +142,27 @@ def test_every_radius_mode_runs_in_tiles(mode):
     assert tiled.stats["tiles"] >= 4
     assert surface_error(tiled.mesh.vertices).mean() < 1.05 * surface_error(
         whole.mesh.vertices).mean() + 1e-5
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_cancel_stops_between_and_during_tiles(workers):
+    import time
+
+    from engine.errors import Cancelled
+
+    cloud = hemisphere_cloud(8_000, seed=4)
+    seen = []
+
+    def progress(fraction, message):
+        seen.append((fraction, message))
+
+    def cancel():
+        return any("tile" in message and fraction > 0.2 for fraction, message in seen)
+
+    started = time.perf_counter()
+    with pytest.raises(Cancelled):
+        reconstruct(cloud, dict(detail="resolution", resolution=48, tile_cells=24,
+                                workers=workers), progress=progress, cancel=cancel)
+    # stopped well before the tiles were all made (a full run takes several times longer)
+    assert max(f for f, _ in seen) < 0.9
+    assert time.perf_counter() - started < 60
