@@ -188,11 +188,12 @@ class ReconstructSettings:
         "Length of a grid cell in the cloud's own units, when Detail is Voxel Size. Smaller "
         "keeps finer detail but takes longer and uses more memory",
         help="cell length in the input's units; giving it sets --detail voxel_size",
-        implies=(("detail", "voxel_size"),), low=1e-9, high=1e9, soft_min=0.0001, soft_max=10.0, precision=4, subtype="DISTANCE")
+        implies=(("detail", "voxel_size"),), low=1e-9, high=1e9, soft_min=0.0001,
+        soft_max=10.0, precision=4, subtype="DISTANCE")
     tile_cells: int = setting(
         0, "Tile Size",
-        "Cells per side of the tiles a large grid is made in, one after the other (0: tiles "
-        "of 256 cells when the grid is larger than 512 cells). Memory follows the tile size",
+        "Cells per side of the tiles a large grid is made in (0: tiles of 256 cells when the "
+        "grid is larger than 512 cells). Memory follows the tile size, not the scan",
         help="cells per side of a tile; 0: tiles of 256 cells when the grid has more than 512 "
              "cells along its longest side, else one grid",
         low=0, high=4096, soft_max=1024)
