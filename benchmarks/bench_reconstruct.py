@@ -6,6 +6,7 @@ Usage (from the repository root)::
     python benchmarks/bench_reconstruct.py [--resolutions 128 256] [--device cpu]
                                            [--udf-source network] [--input examples/owl_50k.ply]
                                            [--radius-mode fixed|curvature|learned] [--no-poisson]
+    python benchmarks/bench_reconstruct.py --kernels [--resolutions 128]
 
 Each run (ours per resolution, then Poisson at depth 9) goes in a fresh child process so its peak
 resident memory (``ru_maxrss``) is its own. Prints one table row per resolution: wall seconds
@@ -19,6 +20,10 @@ ball's neighbour search (which also gives the backbone its patches), the mesher'
 iterations, and the field's floor: network queries x multiply-adds per query / the
 multiply-add rate these cores reach on a large float32 matrix product, measured in the same run.
 Poisson needs open3d (requirements-bench.txt).
+
+``--kernels`` times only the numpy backbone and selector, on one thread, on the patches and
+parent balls the field gives them at the first resolution (process time per query, the best of
+three passes): the figure to compare between two versions of the kernels.
 """
 
 import argparse
@@ -92,6 +97,65 @@ def run_poisson(path: str) -> dict:
             "peak_gib": usage.ru_maxrss / 2 ** 20, "faces": int(len(mesh.faces))}
 
 
+def kernel_timings(path: str, resolution: int, repeats: int = 3) -> str:
+    """The numpy backbone and selector alone, on one thread, on the inputs the field gives them
+    for ``path`` at ``resolution``: process time per query, the best of ``repeats`` passes."""
+    sys.path.insert(0, str(ROOT))
+    import numpy as np
+    from scipy.spatial import cKDTree
+    from threadpoolctl import threadpool_limits
+
+    from engine import field, selector
+    from engine.backbone import load_backbone_numpy
+    from engine.frame import UnitFrame
+    from engine.io import read_point_cloud
+    from engine.settings import ReconstructSettings
+
+    cloud = read_point_cloud(path)
+    points = UnitFrame.from_points(cloud.points).to_unit(cloud.points)
+    tree = cKDTree(points)
+    patches, parents = [], []
+
+    def record_patches(rel, mask):
+        patches.append((rel.copy(), mask.copy()))
+        return np.zeros(len(rel), dtype=np.float32)
+
+    predict_unit = selector.NumpySelector.predict_unit
+
+    def record_parents(self, rel, mask, extra, *args, **kwargs):
+        parents.append((rel.copy(), mask.copy(), extra.copy()))
+        return predict_unit(self, rel, mask, extra, *args, **kwargs)
+
+    selector.NumpySelector.predict_unit = record_parents
+    try:
+        for mode in ("fixed", "learned"):
+            settings = ReconstructSettings(resolution=resolution, device="cpu", radius_mode=mode)
+            field.compute_udf_band(points, settings, tree=tree, predictor=record_patches)
+            if mode == "fixed":
+                fixed_patches, patches = patches, []
+    finally:
+        selector.NumpySelector.predict_unit = predict_unit
+    backbone, radius_net = load_backbone_numpy(), selector.load_selector_numpy()
+    rel, mask, extra = (np.concatenate(arrays) for arrays in zip(*parents))
+
+    def best(run) -> float:
+        times = []
+        for _ in range(repeats):
+            start = time.process_time()
+            run()
+            times.append(time.process_time() - start)
+        return min(times)
+
+    with threadpool_limits(1):
+        seconds_backbone = best(lambda: [backbone.predict(r, m) for r, m in fixed_patches])
+        seconds_selector = best(lambda: radius_net.predict_unit(rel, mask, extra))
+    count = sum(len(r) for r, _ in fixed_patches)
+    return (f"{resolution:>4} kernels, one thread, process time (best of {repeats}): backbone "
+            f"{1e6 * seconds_backbone / count:.1f} us per query on the fixed radius's "
+            f"{count:,} trimmed patches; selector network {1e6 * seconds_selector / len(rel):.1f}"
+            f" us per query on the learned mode's {len(rel):,} parent balls")
+
+
 def multiply_add_rate(threads: int) -> float:
     """Multiply-adds per second of a 2048^3 float32 matrix product on ``threads`` threads."""
     import numpy as np
@@ -115,11 +179,17 @@ def main(argv=None) -> int:
     parser.add_argument("--radius-mode", default="fixed", choices=("fixed", "curvature", "learned"))
     parser.add_argument("--no-poisson", action="store_true",
                         help="skip Open3D's Poisson (needs open3d) on the same cloud")
+    parser.add_argument("--kernels", action="store_true",
+                        help="only time the numpy backbone and selector, on one thread, on the "
+                             "inputs the field gives them at the first resolution")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--poisson-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.poisson_child:
         print(json.dumps(run_poisson(args.input)))
+        return 0
+    if args.kernels:
+        print(kernel_timings(args.input, args.resolutions[0]))
         return 0
     if args.child:
         print(json.dumps(run_one(args.input, args.child, args.device, args.udf_source,
