@@ -166,12 +166,13 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
         kept, flaps = drop_flaps(kept)
         kept, facing = drop_facing_pairs(verts, kept, field, h)
         kept, closed = close_pinholes(kept)
-        verts, seams = extend_rims(verts, kept, field, h)
+        verts, kept, seams = extend_rims(verts, kept, field, h)
+        kept, reclosed = close_pinholes(kept)  # where a face turned over by a rim step went
         stats.update({"twinned_faces": layer.twins, "layer_trees": layer.trees,
                       "double_pairs": layer.double_pairs, "seam_vertices": len(seams),
                       "lip_faces_dropped": lips, "flaps_dropped": flaps,
                       "facing_faces_dropped": facing,
-                      "pinholes_closed": closed})
+                      "pinholes_closed": closed + reclosed})
     else:
         kept = faces
     timings["layers"] = time.perf_counter() - start

@@ -21,7 +21,8 @@ shell of a closed surface (its cover's outer layer is the larger), either side o
 Where the choice switches layers the kept faces end in a *seam*: a boundary lying on the other
 kept sheet, less than a voxel from it. Seams are left as they are (welding them onto the other
 sheet turned faces over and measured as more double area than it closed). Rims, the boundaries
-beyond which the field rises, are moved out to where the field puts the surface's rim.
+beyond which the field rises, are moved out to where the field puts the surface's rim, the
+crowded rows of faces behind them stretched out in order (:func:`extend_rims`).
 
 Kept faces that still face each other within a voxel, turned less than twins (both layers
 stalled a little off the surface and tilted, faces turned at a junction, two sheets crossing),
@@ -329,89 +330,205 @@ def drop_facing_pairs(vertices: np.ndarray, faces: np.ndarray, field, spacing: f
 RIM_PROBE = 2.0  # voxels beyond a rim vertex where the field is asked for the rim
 SEAM_PROBE = 3.5  # voxels beyond a boundary vertex where the field is asked if the surface goes on
 SEAM_DISTANCE = 0.5  # voxels: a field this low there means it does
-TURN_COS = 0.7  # a rim step may turn a face by at most about 45 degrees
-RIM_STEP = 2.0  # voxels a rim vertex moves per pass
-RIM_PASSES = 1
-
+CREASE_PROBE = 1.5  # voxels to either side of the rim point where a crease's other face would be
+RIM_REACH = 4.0  # voxels along the mesh: the strip behind a boundary vertex that it leads
+COHERENT = 0.9  # a strip whose normals, area-weighted, sum to less than this share of its area
+#                 is no clean rim (a junction's slot, a Moebius seam): its vertex stays
+RIM_FALLOFF = 2.0  # voxels inward (at least; 1.5 times the step) over which a rim step fades
+TURN_COS = 0.7  # a rim step may leave a face turned by at most about 45 degrees ...
+SLIVER = 0.1  # ... counted when the face's area (voxels^2) times the turn exceeds this
+BACKTRACK = 4  # halvings of a step that would turn a face over, before it is dropped
+SMOOTH = 2  # rounds of averaging the steps (and their cuts) along the boundary
+FILL = 3  # rounds of lending steps to boundary vertices with no direction of their own
+RIM_PASSES = 2  # a vertex held back by its neighbours' faces gets a second try
 
 def _opposite_near(x: np.ndarray, faces: np.ndarray, which: np.ndarray) -> np.ndarray:
-    """For faces ``which``, True where an opposite-facing face's centroid is within a voxel."""
+    """For faces ``which``, True where one and an opposite-facing face within a voxel (centroids)
+    are both more than slivers."""
     from scipy.spatial import cKDTree
 
-    normals, _ = mesh_ops.face_normals(x, faces)
+    normals, area = mesh_ops.face_normals(x, faces)
     cents = x[faces].mean(axis=1)
     k = min(16, len(faces))
     _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0, workers=-1)
     idx = idx.reshape(len(which), k)
     valid = idx < len(faces)
-    cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], normals[which])
-    return (valid & (cos < -0.5)).any(axis=1)
+    idx = np.where(valid, idx, 0)
+    cos = np.einsum("qkc,qc->qk", normals[idx], normals[which])
+    return (valid & (cos < -0.5) & (area[idx] > SLIVER)).any(axis=1) & (area[which] > SLIVER)
 
 
-def _onto_other_sheet(before: np.ndarray, after: np.ndarray, faces: np.ndarray,
-                      shift: np.ndarray) -> np.ndarray:
-    """Vertices whose rim move brought a face within a voxel of an opposite-facing face (two
-    rims of close sheets, or a rim over the layer below it): those moves are taken back."""
-    moved = np.abs(shift).sum(axis=1) > 0
-    touched = np.nonzero(moved[faces].any(axis=1))[0]
+def _onto_other_sheet(after: np.ndarray, faces: np.ndarray, moved: np.ndarray) -> np.ndarray:
+    """Vertices of ``moved`` whose rim move leaves a face within a voxel of an opposite-facing
+    face (two rims of close sheets, a rim over the layer below it, a seam sliding over the
+    other sheet): a mask over all vertices (``after``: the moved positions)."""
+    is_moved = np.zeros(len(after), bool)
+    is_moved[moved] = True
+    touched = np.nonzero(is_moved[faces].any(axis=1))[0]
     if len(touched) == 0:
-        return np.zeros(len(before), bool)
-    harm = _opposite_near(after, faces, touched) & ~_opposite_near(before, faces, touched)
-    out = np.zeros(len(before), bool)
-    out[faces[touched[harm]].reshape(-1)] = True
-    return out & moved
+        return is_moved & False
+    out = np.zeros(len(after), bool)
+    out[faces[touched[_opposite_near(after, faces, touched)]].reshape(-1)] = True
+    return out & is_moved
 
 
-def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) -> np.ndarray:
+def _sum_rows(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """(n, k) sums of the rows of ``values`` (m, k) grouped by ``index`` (m,)."""
+    return np.stack([np.bincount(index, weights=values[:, c], minlength=n)
+                     for c in range(values.shape[1])], axis=1)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=1), 1e-300)[:, None]
+
+
+@dataclass
+class _Rim:
+    """The open boundary and the strips of surface behind it.
+
+    vertices: boundary vertices; links: the boundary's edges, as pairs of rows; out: unit
+    outward directions (along the surface, across the boundary); valid: where ``out`` is well
+    defined; normal: the strip's mean unit normal per row; strip: for every mesh vertex, the
+    row of the boundary vertex nearest along the edges within ``RIM_REACH`` voxels (-1: none);
+    coherent: where the strips around face one way (``COHERENT``).
+    """
+
+    vertices: np.ndarray
+    links: tuple
+    out: np.ndarray
+    valid: np.ndarray
+    normal: np.ndarray
+    strip: np.ndarray
+    coherent: np.ndarray
+
+
+def _rim(x: np.ndarray, faces: np.ndarray, topo) -> _Rim:
+    """The boundary vertices, their outward directions and the strips behind them.
+
+    Behind a rim the optimisation leaves its last rows of faces crowded into a band a fraction
+    of a voxel wide: slivers whose own normals and corners say little. So each boundary vertex
+    looks at its *strip*: the vertices nearer to it than to any other boundary vertex, along
+    the mesh's edges, within ``RIM_REACH`` voxels (crowded rows are short steps along the edges,
+    so the strip reaches past them to faces of full size). Outward is ``t x n``: ``t`` the
+    boundary's direction at the vertex (its boundary edges, each run the way its face winds,
+    summed with its neighbours' along the boundary: a ragged boundary gives a smooth
+    direction), ``n`` the area-weighted normal of the strips of the vertex and its two
+    neighbours; it is turned round when it points towards the area-weighted centre of the
+    strips two steps along the boundary. A vertex whose boundary edges disagree (a pinch, a
+    hairpin) or whose strips do not face one way (``COHERENT``) has no valid direction.
+    """
+    from scipy import sparse
+    from scipy.sparse.csgraph import dijkstra
+
+    n = len(x)
+    f, k = np.nonzero(topo.counts[topo.face_edges] == 1)
+    a, b = faces[f, k], faces[f, (k + 1) % 3]
+    rim, inverse = np.unique(np.r_[a, b], return_inverse=True)
+    ia, ib = inverse[:len(a)], inverse[len(a):]
+    r = len(rim)
+
+    def along_boundary(values):  # each row plus its neighbours along the boundary
+        return values + _sum_rows(ia, values[ib], r) + _sum_rows(ib, values[ia], r)
+
+    along = x[b] - x[a]
+    tangent = along_boundary(_sum_rows(ia, along, r) + _sum_rows(ib, along, r))
+    length = np.linalg.norm(along, axis=1)[:, None]
+    run = along_boundary(_sum_rows(ia, length, r) + _sum_rows(ib, length, r))[:, 0]
+
+    edges = topo.edges
+    span = np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1) + 1e-9  # 0 would be no edge
+    graph = sparse.csr_matrix((span, (edges[:, 0], edges[:, 1])), shape=(n, n))
+    dist, _, nearest = dijkstra(graph, directed=False, indices=rim, limit=RIM_REACH,
+                                min_only=True, return_predecessors=True)
+    row = np.full(n, -1, np.int64)
+    row[rim] = np.arange(r)
+    reached = np.isfinite(dist)
+    strip = np.full(n, -1, np.int64)
+    strip[reached] = row[nearest[reached]]
+    # the strip's faces, each counted for the strip of each of its corners
+    around = faces[reached[faces].any(axis=1)]
+    normals, area = mesh_ops.face_normals(x, around)
+    corners = around.reshape(-1)
+    owner = strip[corners]
+    inside = owner >= 0
+    owner = owner[inside]
+    weight = np.repeat(area, 3)[inside]
+    face_of = np.repeat(np.arange(len(around)), 3)[inside]
+    normal = along_boundary(_sum_rows(owner, normals[face_of] * weight[:, None], r))
+    total = along_boundary(_sum_rows(owner, weight[:, None], r))[:, 0]
+    coherent = np.linalg.norm(normal, axis=1) > COHERENT * total
+    # the strips of the vertex and its neighbours two steps along the boundary: where the
+    # surface lies seen from the vertex (a strip squeezed between its neighbours' is small)
+    centre = along_boundary(along_boundary(_sum_rows(
+        owner, np.c_[(x[around].mean(axis=1)[face_of] - x[rim[owner]]) * weight[:, None],
+                     weight], r)))
+    centre = centre[:, :3] / np.maximum(centre[:, 3:], 1e-300)
+    normal = _unit_rows(normal)
+    out = np.cross(tangent, normal)
+    out *= np.where(np.einsum("ij,ij->i", out, centre) > 0, -1.0, 1.0)[:, None]
+    size = np.linalg.norm(out, axis=1)
+    # the vertex's boundary edges agree on a direction (not a pinch of two loops or a hairpin)
+    valid = (size > 0.25 * run) & coherent
+    return _Rim(rim, (ia, ib), out / np.maximum(size, 1e-12)[:, None], valid, normal, strip,
+                coherent)
+
+
+def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float):
     """Move the open boundary of the kept mesh out to the surface's rim.
 
-    The cover's fold at a rim is smoothed inward by the optimisation, so the kept layer stops
-    short of the rim. For each boundary vertex the field is asked at ``RIM_PROBE`` voxels beyond
-    it, outward in its tangent plane: from there the closest surface point is the rim itself,
-    and the vertex moves there when that is outward and at most ``RIM_PROBE`` voxels away. Where
-    the field is near zero ``SEAM_PROBE`` voxels beyond, the surface goes on past the boundary:
-    the vertex is on a seam (where the layer choice switched), not a rim, and stays; so does a
-    vertex with another kept sheet just ahead (a junction). The moves
-    go in ``RIM_PASSES`` steps of at most ``RIM_STEP`` voxels.
+    The cover's fold at a rim is smoothed inward by the optimisation (and a sampled field
+    blurs the rim over a voxel), so the kept layer stops a voxel or two short of the rim, its
+    last rows of faces crowded together. For each boundary vertex the field is asked at
+    ``RIM_PROBE`` voxels beyond it, outward along the surface (:func:`_rim`): from there the
+    closest surface point is the rim itself, and the vertex steps out to it when that is
+    outward and at most ``RIM_PROBE`` voxels away. The steps are averaged along the boundary
+    (``SMOOTH`` rounds), and a vertex with no clear direction of its own between two that step
+    borrows theirs. The vertices of its strip follow, less the farther behind it they lie (none
+    at ``RIM_FALLOFF`` voxels, or 1.5 times the step): the crowded rows are stretched out in
+    order. A vertex does not move where the surface goes on past it: where the field is near
+    zero ``SEAM_PROBE`` voxels beyond (a seam, where the layer choice switched), where another
+    kept sheet lies just ahead (a junction), where the surface goes on round the rim point
+    (a crease: a box's edge), or where its strip is not one coherently facing sheet.
 
-    Returns (new vertices (world units), seam vertex indices); faces are unchanged.
+    A step that would turn a face of some size (``SLIVER``) by more than about 45 degrees from
+    its strip's normal is halved with its neighbours', up to ``BACKTRACK`` times, then
+    dropped; one that leaves a face on an opposite-facing sheet is dropped. ``RIM_PASSES``
+    passes give a vertex held back a second try. Slivers a step turned over are removed.
+
+    Returns (new vertices (world units), faces, seam vertex indices).
     """
     none = np.zeros(0, np.int64)
     if len(faces) == 0 or field is None:
-        return vertices, none
+        return vertices, faces, none
     topo = mesh_ops.edge_topology(faces)
-    rim_edges = topo.edges[topo.counts == 1]
-    if len(rim_edges) == 0:
-        return vertices, none
+    if not (topo.counts == 1).any():
+        return vertices, faces, none
     x = vertices / spacing
+    start = x.copy()
     seams = none
-    for step in range(RIM_PASSES):  # in short steps, so no face turns over on the way
-        rim, out, valid = _rim_directions(x, faces, topo)
-        probe = x[rim] + RIM_PROBE * out
+    first = None
+    for step in range(RIM_PASSES):
+        rim = _rim(x, faces, topo)
+        first = first or rim
+        probe = x[rim.vertices] + RIM_PROBE * rim.out
         dist, vec = field.closest(probe * spacing)
         target = probe - vec / spacing
-        ahead = np.einsum("ij,ij->i", target - x[rim], out)  # only outward, no slide
+        ahead = np.einsum("ij,ij->i", target - x[rim.vertices], rim.out)  # no slide along
         if step == 0:
-            # the surface goes on well beyond (past a retracted rim too): a seam, not a rim
-            far, _ = field.closest((x[rim] + SEAM_PROBE * out) * spacing)
-            ahead_sheet = _sheet_ahead(x, faces, rim, out)
-            seams = rim[valid & ((far / spacing < SEAM_DISTANCE) | ahead_sheet)]
-        move = (valid & ~np.isin(rim, seams) & np.isfinite(dist) & (ahead > 0.05)
+            seams = rim.vertices[rim.valid & _goes_on(x, faces, rim, target, field, spacing)]
+        move = (rim.valid & ~np.isin(rim.vertices, seams) & np.isfinite(dist) & (ahead > 0.05)
                 & (ahead < RIM_PROBE))
         if not move.any():
             break
+        steps, move = _smooth_steps(rim, np.where(move[:, None], ahead[:, None] * rim.out, 0.0),
+                                    move)
+        follower, source, weight = _followers(x, rim, steps, move)
+        scale = _hold_back(x, faces, rim, steps, follower, source, weight)
         shift = np.zeros_like(x)
-        shift[rim[move]] = np.minimum(ahead[move], RIM_STEP)[:, None] * out[move]
-        before, _ = mesh_ops.face_normals(x, faces)
-        for _ in range(3):  # a move that turns a face over is taken back
-            after, _ = mesh_ops.face_normals(x + shift, faces)
-            turned = np.einsum("ij,ij->i", before, after) < TURN_COS
-            if not turned.any():
-                break
-            shift[faces[turned].reshape(-1)] = 0.0
-        shift[_onto_other_sheet(x, x + shift, faces, shift)] = 0.0
-        kept_move = np.abs(shift[rim]).sum(axis=1) > 0
-        moved, direction = rim[kept_move], out[kept_move]
+        shift[follower] = (weight * scale[source])[:, None] * steps[source]
+        length = np.linalg.norm(shift, axis=1)
+        moved = np.nonzero(length > 0)[0]
+        direction = shift[moved] / length[moved, None]
         x = x + shift
         # back onto the surface across the step (the sheet curves away from a straight step),
         # not along it (near a rim the field's closest points lag behind the rim)
@@ -420,7 +537,124 @@ def extend_rims(vertices: np.ndarray, faces: np.ndarray, field, spacing: float) 
         v -= np.einsum("ij,ij->i", v, direction)[:, None] * direction
         near = d / spacing < RIM_PROBE
         x[moved[near]] -= v[near]
-    return x * spacing, seams
+    # what a step still turned over is a sliver (larger faces were held back): it goes
+    moved = np.nonzero(np.abs(x - start).sum(axis=1) > 0)[0]
+    if len(moved):
+        which = np.nonzero(np.isin(faces, moved).any(axis=1))[0]
+        reference = _strip_normals(first, faces[which])
+        normal, _ = mesh_ops.face_normals(x, faces[which])
+        faces = np.delete(faces, which[np.einsum("ij,ij->i", normal, reference) < 0], axis=0)
+    return x * spacing, faces, seams
+
+
+def _goes_on(x, faces, rim, target, field, spacing) -> np.ndarray:
+    """Per boundary vertex: the surface goes on past it, so it is no rim. Well beyond it (past
+    a retracted rim too) the field is near zero (a seam), or another kept sheet lies just ahead
+    (a junction), or the surface goes on round the rim point the field gives (a crease)."""
+    far, _ = field.closest((x[rim.vertices] + SEAM_PROBE * rim.out) * spacing)
+    around = np.minimum(_distance(field, (target + CREASE_PROBE * rim.normal) * spacing),
+                        _distance(field, (target - CREASE_PROBE * rim.normal) * spacing))
+    return ((far / spacing < SEAM_DISTANCE) | (around / spacing < SEAM_DISTANCE)
+            | _sheet_ahead(x, faces, rim.vertices, rim.out))
+
+
+def _smooth_steps(rim, steps: np.ndarray, move: np.ndarray):
+    """Steps averaged along the boundary; a vertex with no direction of its own (a pinch, a
+    hairpin of a ragged boundary) on a coherent strip borrows the mean of its two neighbours'
+    (``FILL`` rounds). Returns (steps, which vertices step)."""
+    ia, ib = rim.links
+    r = len(steps)
+    free = ~rim.valid & rim.coherent
+    for _ in range(FILL):
+        have = (np.abs(steps).sum(axis=1) > 0).astype(np.float64)
+        total = _sum_rows(ia, np.c_[steps[ib], have[ib]], r) + _sum_rows(
+            ib, np.c_[steps[ia], have[ia]], r)
+        lend = free & (have == 0) & (total[:, 3] >= 2)
+        steps[lend] = total[lend, :3] / total[lend, 3:]
+        move = move | lend
+    both = move[ia] & move[ib]
+    ja, jb = ia[both], ib[both]
+    count = 1.0 + np.bincount(ja, minlength=r) + np.bincount(jb, minlength=r)
+    for _ in range(SMOOTH):
+        steps = (steps + _sum_rows(ja, steps[jb], r) + _sum_rows(jb, steps[ja], r)) / count[:, None]
+    return steps, move
+
+
+def _followers(x: np.ndarray, rim, steps: np.ndarray, move: np.ndarray):
+    """The vertices that follow the stepping boundary vertices: those of their strips, by ``1 -
+    depth / reach`` of the step, ``depth`` how far behind the boundary vertex they lie across
+    the boundary (vertices in one place, crowded rows, move alike; reach: ``RIM_FALLOFF``
+    voxels or 1.5 times the step). Returns (vertices, their strip's row, their share)."""
+    reach = np.maximum(RIM_FALLOFF, 1.5 * np.linalg.norm(steps, axis=1))
+    follower = np.nonzero(rim.strip >= 0)[0]
+    source = rim.strip[follower]
+    keep = move[source]
+    follower, source = follower[keep], source[keep]
+    depth = np.einsum("ij,ij->i", x[rim.vertices[source]] - x[follower], rim.out[source])
+    weight = 1.0 - np.maximum(depth, 0.0) / reach[source]
+    keep = weight > 0
+    return follower[keep], source[keep], weight[keep]
+
+
+def _strip_normals(rim, faces: np.ndarray) -> np.ndarray:
+    """Per face, the sum of its corners' strip normals (zero off the strips)."""
+    owner = rim.strip[faces]
+    return np.where(owner[:, :, None] >= 0, rim.normal[np.maximum(owner, 0)], 0.0).sum(axis=1)
+
+
+def _hold_back(x, faces, rim, steps, follower, source, weight) -> np.ndarray:
+    """How much of its step each strip takes (rows of ``rim``): cut where a face of some size
+    would turn by more than about 45 degrees from its strips' normal (halved with the
+    neighbours along the boundary, ``BACKTRACK`` times, then zero), and zero where a face
+    would end on an opposite-facing sheet."""
+    scale = np.ones(len(steps))
+    touched = faces[np.isin(faces, follower).any(axis=1)]
+    owner = rim.strip[touched]
+    reference = _unit_rows(_strip_normals(rim, touched))
+    before = np.einsum("ij,ij->i", mesh_ops.face_normals(x, touched)[0], reference)
+    ia, ib = rim.links
+    checked = False
+    for attempt in range(BACKTRACK + 2):
+        moved = x.copy()
+        moved[follower] += (weight * scale[source])[:, None] * steps[source]
+        normal, area = mesh_ops.face_normals(moved, touched)
+        after = np.einsum("ij,ij->i", normal, reference)
+        # a sliver's normal says nothing: only faces of some size count
+        turned = (after < TURN_COS) & (after < before) & (area * (TURN_COS - after) > SLIVER)
+        if turned.any():
+            culprits = owner[turned].reshape(-1)
+            culprits = np.unique(culprits[culprits >= 0])
+            scale[culprits] = 0.0 if attempt >= BACKTRACK else 0.5 * scale[culprits]
+            for _ in range(SMOOTH):  # the neighbours along the boundary step down too
+                low = scale.copy()
+                np.minimum.at(low, ia, 0.5 + 0.5 * scale[ib])
+                np.minimum.at(low, ib, 0.5 + 0.5 * scale[ia])
+                scale = np.minimum(scale, low)
+            continue
+        if checked:
+            break
+        harm = _onto_other_sheet(moved, faces, follower)
+        scale[np.unique(rim.strip[harm])] = 0.0
+        checked = True
+    return scale
+
+def _distance(field, points: np.ndarray) -> np.ndarray:
+    """The field's distances at world ``points``: trilinear in the grid's node values (the
+    closest-point vector field vanishes midway between two sheets; the distances do not)."""
+    if field.exact is not None:
+        return field.closest(points)[0]
+    g = field.world_to_index(points)
+    dims = np.array(field.shape)
+    cell = np.clip(np.floor(g).astype(np.int64), 0, dims - 2)
+    t = np.clip(g - cell, 0.0, 1.0)
+    out = np.zeros(len(g))
+    for dx, dy, dz in np.ndindex(2, 2, 2):
+        node = cell + (dx, dy, dz)
+        flat = (node[:, 0] * dims[1] + node[:, 1]) * dims[2] + node[:, 2]
+        w = ((t[:, 0] if dx else 1 - t[:, 0]) * (t[:, 1] if dy else 1 - t[:, 1])
+             * (t[:, 2] if dz else 1 - t[:, 2]))
+        out += w * field.values_at(flat)
+    return out
 
 
 def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndarray):
@@ -434,29 +668,6 @@ def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndar
         d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6, workers=-1)
         hit |= np.isfinite(d)
     return hit
-
-
-def _rim_directions(x: np.ndarray, faces: np.ndarray, topo):
-    """Boundary vertices, their outward unit directions and whether those are well defined.
-
-    Outward: per boundary edge, in its face's plane, away from the face's third corner, summed
-    over the vertex's boundary edges.
-    """
-    f, k = np.nonzero(topo.counts[topo.face_edges] == 1)
-    a, b, c = faces[f, k], faces[f, (k + 1) % 3], faces[f, (k + 2) % 3]
-    along = x[b] - x[a]
-    inward = x[c] - x[a]
-    perp = inward - (np.einsum("ij,ij->i", inward, along)
-                     / np.maximum(np.einsum("ij,ij->i", along, along), 1e-300))[:, None] * along
-    perp /= np.maximum(np.linalg.norm(perp, axis=1), 1e-300)[:, None]
-    out_sum = np.zeros_like(x)
-    np.add.at(out_sum, a, -perp)
-    np.add.at(out_sum, b, -perp)
-    rim = np.unique(np.r_[a, b])
-    out = out_sum[rim]
-    length = np.linalg.norm(out, axis=1)
-    valid = length > 0.5  # the vertex's two rim edges agree on outward
-    return rim, out / np.maximum(length, 1e-12)[:, None], valid
 
 
 PINHOLE_EDGES = 8  # boundary loops this short are holes left by the choice, not rims

@@ -122,13 +122,14 @@ def test_open_shapes_one_layer(name):
     _, face_area = mo.face_normals(mesh.vertices, mesh.faces)
     assert np.bincount(s["labels"], weights=face_area).max() > 0.995 * face_area.sum()  # one piece
     assert double_share(mesh) < 0.01  # one layer: no opposite-facing sheet within a voxel
-    assert 0.93 < area(mesh) / TRUE_AREA[name] < 1.02  # not doubled, rims not far retracted
+    assert 0.985 < area(mesh) / TRUE_AREA[name] < 1.015  # not doubled, rims in place
     d = shape(mesh.vertices)[0] / H
     assert d.mean() < 0.05 and d.max() < 0.8
     rim = mesh.vertices[s["boundary_vertices"]]
-    # the boundary follows the true rim (not yet within the half voxel we aim for)
+    # the boundary follows the true rim; at 64^3 some of it a voxel or so in where the rim step
+    # was held back (finer grids: test_open_rims_in_place)
     to_rim = rim_distance(name, rim)
-    assert np.median(to_rim) < 1.6 and np.quantile(to_rim, 0.99) < 2.7 and to_rim.max() < 3.5
+    assert np.median(to_rim) < 0.2 and to_rim.max() < 2.0
     from scipy.spatial import cKDTree
     gap, _ = cKDTree(rim).query(rim_points(name))
     assert gap.max() / H < 2.5  # and the whole true rim is followed
@@ -138,6 +139,31 @@ def test_open_shapes_one_layer(name):
     directed = np.stack([mesh.faces, np.roll(mesh.faces, -1, axis=1)], axis=2).reshape(-1, 2)
     _, counts = np.unique(directed, axis=0, return_counts=True)
     assert (counts > 1).sum() <= 0.005 * len(mesh.faces)
+
+
+def rim_distance_at(name, points, spacing):
+    return rim_distance(name, points) * H / spacing
+
+
+@pytest.mark.parametrize("name", ["disk", "square"])
+@pytest.mark.parametrize("res,exact", [(128, False), (256, False), (128, True)])
+def test_open_rims_in_place(name, res, exact):
+    """Open rims come out where the surface ends: the area within 1 % of the truth and the
+    boundary on the true rim. On a sampled grid (as a reconstruction's field is) the median
+    boundary vertex is within a tenth of a voxel and 90 % within half a voxel; the rest (up to
+    about 6 %: a corner of the square, stretches of the disk where the rim step was held back
+    to keep faces from turning over) stay up to 2 voxels in. With the exact field every
+    boundary vertex is within half a voxel."""
+    shape = shapes()[name]
+    grid = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, res, exact=exact)
+    mesh = extract_surface(grid).mesh
+    assert abs(area(mesh) / TRUE_AREA[name] - 1) < 0.01
+    to_rim = rim_distance_at(name, mesh.vertices[summary(mesh)["boundary_vertices"]],
+                             grid.spacing)
+    assert np.median(to_rim) < 0.1 and np.quantile(to_rim, 0.9) < 0.5 and to_rim.max() < 2.0
+    if exact:
+        assert to_rim.max() < 0.5
+    assert double_share(mesh) < 0.001
 
 
 def test_two_close_sheets_stay_separate():
