@@ -192,9 +192,9 @@ class ReconstructSettings:
         soft_max=10.0, precision=4, subtype="DISTANCE")
     tile_cells: int = setting(
         0, "Tile Size",
-        "Cells per side of the tiles a large grid is made in (0: tiles of 256 cells when the "
+        "Cells per side of the tiles a large grid is made in (0: tiles of 192 cells when the "
         "grid is larger than 512 cells). Memory follows the tile size, not the scan",
-        help="cells per side of a tile; 0: tiles of 256 cells when the grid has more than 512 "
+        help="cells per side of a tile; 0: tiles of 192 cells when the grid has more than 512 "
              "cells along its longest side, else one grid",
         low=0, high=4096, soft_max=1024)
     workers: int = setting(

@@ -26,9 +26,10 @@ import numpy as np
 
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 
-AUTO_TILE_CELLS = 256
-"""With ``tile_cells`` 0, a grid of more than twice this many cells along a side is made in
-tiles of this many cells."""
+AUTO_TILE_CELLS = 192
+"""With ``tile_cells`` 0, tiles of this many cells per side (a worker's memory follows it)."""
+AUTO_TILE_ABOVE = 512
+"""With ``tile_cells`` 0, a grid of more than this many cells along its longest side is tiled."""
 HALO_CELLS = 8
 """Cells beyond a tile's core that it meshes too, so its core's faces see the surface go on."""
 SAME_CELLS = 0.1
@@ -274,7 +275,7 @@ def tile_size(detail, settings) -> int:
     """Cells per tile side for a reconstruction, 0 for one grid without tiles."""
     if settings.tile_cells:
         return int(settings.tile_cells)
-    return AUTO_TILE_CELLS if detail.cells > 2 * AUTO_TILE_CELLS else 0
+    return AUTO_TILE_CELLS if detail.cells > AUTO_TILE_ABOVE else 0
 
 
 def tile_reach(settings, spacing: float) -> float:
