@@ -4,7 +4,7 @@ detail in metres in tiles, beside Open3D's screened Poisson on the same cloud in
 Usage (from the repository root)::
 
     python benchmarks/bench_scale.py [--rooms 4] [--points 1000000] [--voxel-size 0.01]
-                                     [--tile-cells 256] [--workers 0] [--poisson-depth 10]
+                                     [--tile-cells 0] [--workers 0] [--poisson-depth 10]
                                      [--no-poisson] [--json out.json]
 
 Prints, for ours (``--detail voxel_size``) and for Poisson: wall seconds, peak resident memory
@@ -124,7 +124,7 @@ def main() -> None:
     parser.add_argument("--rooms", type=int, default=4)
     parser.add_argument("--points", type=int, default=1_000_000)
     parser.add_argument("--voxel-size", type=float, default=0.01, help="metres")
-    parser.add_argument("--tile-cells", type=int, default=256)
+    parser.add_argument("--tile-cells", type=int, default=0, help="0: automatic")
     parser.add_argument("--workers", type=int, default=0, help="0: every core")
     parser.add_argument("--poisson-depth", type=int, default=10)
     parser.add_argument("--no-poisson", action="store_true")
