@@ -66,7 +66,7 @@ def map_in_threads(task: Callable, items: Iterable, threads: int) -> Iterator:
     differently, and the answers must not depend on the thread count.
 
     The first exception any task raises (a cancel, say) is raised here once the tasks that had
-    started have finished.
+    started have finished; the tasks not yet started are dropped.
     """
     items = list(items)
     with one_blas_thread():  # on one thread too: the same BLAS path, the same answers
@@ -75,6 +75,8 @@ def map_in_threads(task: Callable, items: Iterable, threads: int) -> Iterator:
                 yield task(item)
             return
         with ThreadPoolExecutor(min(threads, len(items))) as pool:
+            # closing pool.map's iterator (an error, a cancel, the caller stops reading)
+            # cancels the tasks not yet started
             yield from pool.map(task, items)
 
 

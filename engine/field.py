@@ -330,12 +330,16 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     totals = {"sparse": 0, "widened": 0, "points": 0, "seconds_radius": 0.0,
               "seconds_parent": 0.0, "seconds": 0.0}
     done = 0
-    for result in map_in_threads(one_batch, range(0, len(queries), batch), threads):
-        for key in totals:
-            totals[key] += result[key]
-        done += result["count"]
-        progress(0.1 + 0.9 * done / len(queries),
-                 f"network UDF: {done:,} / {len(queries):,} queries")
+    results = map_in_threads(one_batch, range(0, len(queries), batch), threads)
+    try:
+        for result in results:
+            for key in totals:
+                totals[key] += result[key]
+            done += result["count"]
+            progress(0.1 + 0.9 * done / len(queries),
+                     f"network UDF: {done:,} / {len(queries):,} queries")
+    finally:
+        results.close()  # on a cancel from the progress report too: start no other batch
     stats["sparse_balls"] = totals["sparse"]
     stats["widened_balls"] = totals["widened"]
     # the radius policy's share of the batches' time (on several threads their times overlap)

@@ -2,6 +2,8 @@
 every radius mode (each batch of queries is cut and computed the same way on any number of
 threads, with the BLAS on one thread)."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -39,3 +41,35 @@ def test_the_radius_share_is_a_part_of_the_field_time():
                                                                  device="cpu"))
     assert 0 < band.stats["seconds_radius"] < band.stats["seconds_udf"]
     assert "radius_share" not in band.stats
+
+
+def test_a_cancel_stops_the_threaded_field_without_running_the_other_batches(monkeypatch):
+    from engine.errors import Cancelled
+
+    monkeypatch.setattr(field, "CPU_BATCH", 500)
+    monkeypatch.setattr(field, "cpu_threads", lambda: 2)
+    calls = []
+
+    def predictor(rel, mask):
+        calls.append(len(rel))
+        return np.zeros(len(rel), dtype=np.float32)
+
+    settings = ReconstructSettings(resolution=48, device="cpu")
+    whole = compute_udf_band(sphere_points(), settings, predictor=predictor)
+    batches = -(-whole.stats["network_queries"] // 500)
+    assert batches >= 12
+    calls.clear()
+    with pytest.raises(Cancelled):
+        compute_udf_band(sphere_points(), settings, predictor=predictor,
+                         cancel=lambda: len(calls) >= 2)
+    assert len(calls) <= batches // 2  # the batches already running finish; few others start
+
+    def progress(fraction, message):  # a host that stops the run from its progress report
+        if message.startswith("network UDF"):
+            raise Cancelled()
+
+    calls.clear()
+    with pytest.raises(Cancelled):
+        compute_udf_band(sphere_points(), settings, predictor=predictor, progress=progress)
+    time.sleep(0.5)  # no batch left running behind the raised error either
+    assert len(calls) <= batches // 2
