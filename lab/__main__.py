@@ -9,9 +9,11 @@ import sys
 from engine.commands import run_cli
 
 from .bench import command as bench
+from .bench import scale
 
 COMMANDS = {
     "bench": (bench, "Run a reconstruction method over benchmark shapes; print a table."),
+    "scale": (scale, "Reconstruct a generated multi-room floor in tiles beside Poisson."),
 }
 
 

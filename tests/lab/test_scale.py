@@ -1,0 +1,24 @@
+"""The scale benchmark end to end on a tiny floor: it runs, scores in metres and reports."""
+
+import json
+
+from lab.__main__ import main
+
+
+def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys):
+    out = tmp_path / "results"
+    status = main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.04",
+                   "--tile-cells", "48", "--no-poisson", "--work", str(tmp_path / "work"),
+                   "--out", str(out)])
+    assert status == 0
+    (path,) = out.glob("floor_*.json")
+    rows = json.loads(path.read_text())["rows"]
+    ours = rows["ours (voxel 4 cm)"]
+    assert ours["tiles"] >= 2
+    # a 4 cm grid over a 20,000-point room: within a couple of centimetres of the truth
+    assert ours["cd_cm"] < 3.0 and ours["f1_2cm"] > 0.6 and ours["nc"] > 0.85
+    assert "scan's own floor" in rows
+    capsys.readouterr()
+    assert main(["scale", "--report", "--out", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "| 1 rooms, 20,000 points | ours (voxel 4 cm) |" in table
