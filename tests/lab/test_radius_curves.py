@@ -104,3 +104,20 @@ def test_default_radii_span_a_few_times_todays_parent_radius():
     assert RADII[0] < 0.012 and RADII[-1] >= 4 * 0.024
     assert {0.018, 0.024} <= set(RADII)
     assert list(RADII) == sorted(RADII)
+
+
+def test_lookup_table_gives_each_feature_cell_its_own_best_radius():
+    from lab.training.radius_lookup import cell_index, fit_table
+
+    rng = np.random.default_rng(2)
+    features = rng.random((4000, 3))
+    # queries with a first feature above its median are best at radius index 2, the rest at 0
+    wants_large = features[:, 0] > np.quantile(features[:, 0], 0.5)  # on a bin edge
+    errors = np.where(wants_large[:, None], [3.0, 2.0, 1.0], [1.0, 2.0, 3.0])
+    errors = errors + 0.1 * rng.random(errors.shape)
+    edges, choice = fit_table(errors, features, bins=4, min_cell=20)
+    picked = choice[cell_index(features, edges)]
+    assert np.all(picked[wants_large] == 2) and np.all(picked[~wants_large] == 0)
+    # a cell with too few fitting queries falls back to the overall best radius
+    _, sparse_choice = fit_table(errors[:30], features[:30], bins=4, min_cell=1000)
+    assert np.all(sparse_choice == np.argmin(errors[:30].mean(axis=0)))
