@@ -15,14 +15,15 @@ through its threads).
 
 import os
 import sys
-import time
-from typing import Callable, List, Optional, Sequence
+from typing import Callable, List, Optional
 
-from .errors import Cancelled, InputError
+from .errors import InputError
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 
 POLL_SECONDS = 0.2
 """How often a waiting run checks for a cancel."""
+IN_FLIGHT = 2
+"""Tiles sent ahead per worker (one running, one waiting)."""
 CONNECT_SECONDS = 10
 """How long to try reaching a Dask scheduler before saying it cannot be reached."""
 
@@ -35,13 +36,15 @@ def available_cores() -> int:
         return max(os.cpu_count() or 1, 1)
 
 
-def run_tiles(task: Callable, jobs: Sequence[tuple], workers: int = 1, scheduler: str = "",
-              progress: Optional[ProgressFn] = None,
+def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: int = 1,
+              scheduler: str = "", progress: Optional[ProgressFn] = None,
               cancel: Optional[CancelFn] = None) -> List:
-    """``[task(*job) for job in jobs]``, in order, run as asked.
+    """``[task(*job(i)) for i in range(count)]``, in order, run as asked.
 
     task : a module-level function (it is sent to other processes); in this process it also
         gets ``progress=`` and ``cancel=`` keywords.
+    job : the arguments of tile ``i``, made only when the tile is about to be sent, so at most
+        :data:`IN_FLIGHT` tiles per worker have their inputs in memory at once.
     workers : processes (0: every core); with one, the tiles run in this process.
     scheduler : ``""`` (no Dask), ``"local"`` or a Dask scheduler's address.
     progress : called with the share of tiles done.
@@ -51,16 +54,37 @@ def run_tiles(task: Callable, jobs: Sequence[tuple], workers: int = 1, scheduler
     progress = progress or no_progress
     workers = workers or available_cores()
     if scheduler:
-        return _on_dask(task, jobs, workers, scheduler, progress, cancel)
-    if workers <= 1 or len(jobs) <= 1 or "bpy" in sys.modules:
+        return _on_dask(task, count, job, workers, scheduler, progress, cancel)
+    if workers <= 1 or count <= 1 or "bpy" in sys.modules:
         results = []
-        for number, job in enumerate(jobs):
+        for number in range(count):
             check_cancel(cancel)
-            part = sub_progress(progress, number / len(jobs), (number + 1) / len(jobs))
-            part(0.0, f"tile {number + 1} of {len(jobs)}")
-            results.append(task(*job, progress=part, cancel=cancel))
+            part = sub_progress(progress, number / count, (number + 1) / count)
+            part(0.0, f"tile {number + 1} of {count}")
+            results.append(task(*job(number), progress=part, cancel=cancel))
         return results
-    return _in_processes(task, jobs, min(workers, len(jobs)), progress, cancel)
+    return _in_processes(task, count, job, min(workers, count), progress, cancel)
+
+
+def _windowed(submit: Callable, wait_some: Callable, count: int, job, window: int,
+              progress: ProgressFn, cancel: Optional[CancelFn], where: str) -> List:
+    """Keep ``window`` tiles in flight (``submit(args) -> future``), collect them in order.
+
+    ``wait_some(futures)`` returns the futures finished within :data:`POLL_SECONDS`.
+    """
+    results = [None] * count
+    running = {}
+    sent = done = 0
+    while done < count:
+        check_cancel(cancel)
+        while sent < count and len(running) < window:
+            running[submit(job(sent))] = sent
+            sent += 1
+        for future in wait_some(list(running)):
+            results[running.pop(future)] = future.result()
+            done += 1
+        progress(done / count, f"{done} of {count} tiles done {where}")
+    return results
 
 
 def _one_thread() -> None:
@@ -73,7 +97,7 @@ def _one_thread() -> None:
     threadpool_limits(1)
 
 
-def _in_processes(task, jobs, workers, progress, cancel) -> List:
+def _in_processes(task, count, job, workers, progress, cancel) -> List:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -81,15 +105,11 @@ def _in_processes(task, jobs, workers, progress, cancel) -> List:
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_one_thread)
     try:
-        pending = [pool.submit(task, *job) for job in jobs]
-        while True:
-            check_cancel(cancel)
-            done = sum(future.done() for future in pending)
-            progress(done / len(pending), f"{done} of {len(pending)} tiles done on "
-                                          f"{workers} workers")
-            if done == len(pending):
-                return [future.result() for future in pending]
-            wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
+        return _windowed(lambda args: pool.submit(task, *args),
+                         lambda futures: wait(futures, timeout=POLL_SECONDS,
+                                              return_when=FIRST_COMPLETED)[0],
+                         count, job, IN_FLIGHT * workers, progress, cancel,
+                         f"on {workers} workers")
     except BrokenProcessPool:
         raise InputError("the worker processes stopped before finishing (out of memory, or a "
                          "script that calls reconstruct() outside `if __name__ == "
@@ -100,9 +120,9 @@ def _in_processes(task, jobs, workers, progress, cancel) -> List:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _on_dask(task, jobs, workers, scheduler, progress, cancel) -> List:
+def _on_dask(task, count, job, workers, scheduler, progress, cancel) -> List:
     try:
-        from dask.distributed import Client, LocalCluster
+        from dask.distributed import Client, LocalCluster, wait
     except ImportError:
         raise InputError("running tiles on Dask needs Dask: pip install \"dask[distributed]\"; "
                          "or run without a scheduler") from None
@@ -117,20 +137,25 @@ def _on_dask(task, jobs, workers, scheduler, progress, cancel) -> List:
         except (OSError, TimeoutError) as error:
             raise InputError(f"could not reach the Dask scheduler at {scheduler}: "
                              f"{error}") from None
+    running = []
     try:
         client.run(_one_thread)
-        futures = [client.submit(task, *job, pure=False) for job in jobs]
-        while True:
-            if cancel is not None and cancel():
-                client.cancel(futures)
-                raise Cancelled("cancelled by the user")
-            finished = sum(future.done() for future in futures)
-            progress(finished / len(futures), f"{finished} of {len(futures)} tiles done on Dask")
-            if finished == len(futures):
-                break
-            time.sleep(POLL_SECONDS)
-        return client.gather(futures)
+        window = IN_FLIGHT * max(len(client.scheduler_info()["workers"]), 1)
+
+        def submit(args):
+            future = client.submit(task, *args, pure=False)
+            running.append(future)
+            return future
+
+        def wait_some(futures):
+            try:
+                return wait(futures, timeout=POLL_SECONDS, return_when="FIRST_COMPLETED").done
+            except TimeoutError:
+                return []
+
+        return _windowed(submit, wait_some, count, job, window, progress, cancel, "on Dask")
     finally:
+        client.cancel([future for future in running if not future.done()])
         client.close()
         if cluster is not None:
             cluster.close()

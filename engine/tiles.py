@@ -18,13 +18,12 @@ Memory is bounded by the tile size, not the scene; time grows with the number of
 hold points.
 """
 
-import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
+from .progress import CancelFn, ProgressFn, no_progress, sub_progress
 
 AUTO_TILE_CELLS = 192
 """With ``tile_cells`` 0, tiles of this many cells per side (a worker's memory follows it)."""
@@ -94,10 +93,8 @@ def stitch(pieces, spacing: float):
     vertices : (n, 3) float64; faces : (m, 3) int64
     stats : dict with ``welded`` vertex pairs, ``flipped`` pieces, ``holes_closed``
     """
-    from scipy.spatial import cKDTree
-
     from .meshing.layers import close_pinholes
-    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
+    from .meshing.mesh_ops import edge_topology, vertex_components
 
     vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
     offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
@@ -221,7 +218,7 @@ def _agree_orientation(vertices, faces, piece, count, a, b):
     piece's parity. Returns the faces (some rows reversed) and how many pieces were turned.
     """
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
+    from scipy.sparse.csgraph import minimum_spanning_tree
 
     from .meshing.mesh_ops import face_normals
 
@@ -332,9 +329,13 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     tiles = plan_tiles(points, spacing, tile_cells)
     anchor = points.min(axis=0)
     reach = tile_reach(settings, spacing)
-    jobs = [(points[tile_points(points, tile, reach)], tile, anchor, settings, meshing,
-             udf_source) for tile in tiles]
-    results = run_tiles(mesh_tile, jobs, settings.workers, settings.scheduler,
+
+    def job(number: int) -> tuple:
+        tile = tiles[number]
+        return (points[tile_points(points, tile, reach)], tile, anchor, settings, meshing,
+                udf_source)
+
+    results = run_tiles(mesh_tile, len(tiles), job, settings.workers, settings.scheduler,
                         sub_progress(progress, 0.0, 0.95), cancel)
     pieces = []
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
