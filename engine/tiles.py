@@ -7,12 +7,19 @@ points within its *core* (a cube of ``tile_cells`` cells) widened by a halo of
 is meshed on its own; only the faces whose centroid lies in its core are kept (the cores tile
 the space without overlap, so no face is kept twice).
 
-Stitching. Along a border the two tiles' faces end within a fraction of a cell of each other:
-both meshed the same surface from the same points. Boundary vertices of different tiles that
-are each other's nearest within :data:`WELD_CELLS` cells are welded (to their midpoint); the
-slivers left between welded pairs are holes of a few edges, which are closed. A piece whose
-layer choice faces the other way from its neighbour across the border (the two sides of an open
-sheet are equally good) is turned over first, so the welded mesh keeps one orientation.
+Every tile's grid lies on one lattice shared by all tiles, so two neighbours compute the same
+field, cover and, mostly, the same faces along their common border.
+
+Stitching. Boundary vertices of different tiles within :data:`SAME_CELLS` of each other are one
+vertex meshed by both and are merged; the others that are each other's nearest across tiles
+within :data:`WELD_CELLS` cells are welded (to their mean). A piece whose layer choice faces the
+other way from its neighbour across the border (the two sides of an open sheet are equally
+good) is turned over first, so the welded mesh keeps one orientation. A face both tiles kept
+is kept once, faces left hanging on a weld are dropped and the holes left along the seam (up to
+:data:`SEAM_HOLE_EDGES` edges) are closed.
+
+Tiles are made one after the other in this process, in worker processes or on a Dask cluster
+(:mod:`.tile_runners`), with the same result.
 
 Memory is bounded by the tile size, not the scene; time grows with the number of tiles that
 hold points.
@@ -91,7 +98,8 @@ def stitch(pieces, spacing: float):
     Returns
     -------
     vertices : (n, 3) float64; faces : (m, 3) int64
-    stats : dict with ``welded`` vertex pairs, ``flipped`` pieces, ``holes_closed``
+    stats : dict with ``welded`` vertices, ``flipped`` pieces, ``ears_dropped`` faces and
+        ``holes_closed``
     """
     from .meshing.layers import close_pinholes
     from .meshing.mesh_ops import edge_topology, vertex_components
