@@ -12,9 +12,10 @@ field, cover and, mostly, the same faces along their common border.
 
 Stitching. Boundary vertices of different tiles within :data:`SAME_CELLS` of each other are one
 vertex meshed by both and are merged; the others that are each other's nearest across tiles
-within :data:`WELD_CELLS` cells are welded (to their mean). A piece whose layer choice faces the
-other way from its neighbour across the border (the two sides of an open sheet are equally
-good) is turned over first, so the welded mesh keeps one orientation. A face both tiles kept
+within :data:`WELD_CELLS` cells are welded (to their mean). The two sides of an open sheet are
+equally good layers, and a tile may keep the other side than its neighbours: such a tile is made
+again keeping the side they kept (:func:`tiles_to_turn`), since the two sides share no vertices
+along the border; a piece still facing the other way is turned over. A face both tiles kept
 is kept once, faces left hanging on a weld are dropped and the holes left along the seam (up to
 :data:`SEAM_HOLE_EDGES` edges) are closed.
 
@@ -25,6 +26,7 @@ Memory is bounded by the tile size, not the scene; time grows with the number of
 hold points.
 """
 
+import dataclasses
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
@@ -42,6 +44,8 @@ SAME_CELLS = 0.1
 """Boundary vertices of different tiles this close (cells) are one vertex meshed by both."""
 SEAM_HOLE_EDGES = 16
 """Holes of up to this many edges left along a welded seam are closed."""
+NORMAL_RINGS = 3
+"""Rings of faces around a welded vertex whose normals vote on the orientation."""
 WELD_CELLS = 0.9
 """Other boundary vertices of neighbouring tiles that are each other's nearest within this
 many cells are welded too."""
@@ -118,8 +122,8 @@ def stitch(pieces, spacing: float):
     a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
     a, b = rim[a], rim[b]
     if len(a):
-        count, piece = vertex_components(len(vertices), faces)
-        faces, stats["flipped"] = _agree_orientation(vertices, faces, piece, count, a, b)
+        count, face_piece = vertex_components(len(vertices), faces)
+        faces, stats["flipped"] = _agree_orientation(vertices, faces, face_piece, count, a, b)
         vertices, merged = _weld(vertices, a, b)
         faces = merged[faces]
         faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
@@ -130,6 +134,35 @@ def stitch(pieces, spacing: float):
         faces, stats["ears_dropped"] = _drop_ears(faces)
         faces, stats["holes_closed"] = close_pinholes(faces, SEAM_HOLE_EDGES)
     return vertices, faces, stats
+
+
+def tiles_to_turn(pieces, spacing: float) -> np.ndarray:
+    """Indices of the tiles whose kept layer faces against their neighbours' across the
+    borders (by the votes of :func:`_agree_orientation`): the smaller side, by area."""
+    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
+
+    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
+    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
+    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
+                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
+    if not len(faces):
+        return np.zeros(0, np.int64)
+    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
+    topo = edge_topology(faces)
+    rim = np.unique(topo.edges[topo.counts == 1])
+    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
+    if not len(a):
+        return np.zeros(0, np.int64)
+    count, face_piece = vertex_components(len(vertices), faces)
+    turned = _agree_orientation(vertices, faces, face_piece, count, rim[a], rim[b])[0]
+    flipped = turned[:, 0] != faces[:, 0]
+    area = face_normals(vertices, faces)[1]
+    if area[flipped].sum() > area[~flipped].sum():
+        flipped = ~flipped  # an open sheet's orientation is free: turn the smaller side
+    face_tile = tile_of[faces[:, 0]]
+    share = np.bincount(face_tile, weights=area * flipped, minlength=len(pieces))
+    total = np.bincount(face_tile, weights=area, minlength=len(pieces))
+    return np.flatnonzero(share > 0.5 * np.maximum(total, 1e-300))
 
 
 def _drop_ears(faces: np.ndarray, passes: int = 3):
@@ -218,24 +251,32 @@ def _mutual_nearest_across(points: np.ndarray, tile_of: np.ndarray, reach: float
     return i[keep], j[keep]
 
 
-def _agree_orientation(vertices, faces, piece, count, a, b):
+def _agree_orientation(vertices, faces, face_piece, count, a, b):
     """Turn over the pieces whose faces at welded pairs face against their neighbours'.
 
     Each welded pair votes (its two vertices' mean normals agree or not) between the two
     pieces it joins; a spanning forest over the pieces, strongest votes first, fixes each
-    piece's parity. Returns the faces (some rows reversed) and how many pieces were turned.
+    piece's parity. ``face_piece`` (m,) numbers the pieces (``count`` of them) per face.
+    Returns the faces (some rows reversed) and how many pieces were turned.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import minimum_spanning_tree
 
     from .meshing.mesh_ops import face_normals
 
+    from .meshing.mesh_ops import incidence_matrix
+
     normals, areas = face_normals(vertices, faces)
-    weighted = normals * areas[:, None]
-    vertex_normal = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vertex_normal, faces[:, k], weighted)
+    # the normal of the few rings around each vertex: the faces at a tile's cut are slivers
+    incidence = incidence_matrix(len(vertices), faces)  # vertices x faces
+    vertex_normal = incidence @ (normals * areas[:, None])
+    for _ in range(NORMAL_RINGS):
+        vertex_normal = incidence @ (incidence.T @ vertex_normal)
+    vertex_normal /= np.maximum(np.linalg.norm(vertex_normal, axis=1), 1e-300)[:, None]
     agree = np.einsum("ij,ij->i", vertex_normal[a], vertex_normal[b])
+    piece = np.zeros(len(vertices), np.int64)
+    for k in range(3):
+        piece[faces[:, k]] = face_piece
     pa, pb = piece[a], piece[b]
     between = pa != pb
     pa, pb, agree = pa[between], pb[between], agree[between]
@@ -270,7 +311,7 @@ def _agree_orientation(vertices, faces, piece, count, a, b):
                     seen[other] = True
                     flip[other] = flip[node] ^ (s < 0)
                     stack.append(other)
-    turned = flip[piece[faces[:, 0]]]
+    turned = flip[face_piece]
     faces = faces.copy()
     faces[turned] = faces[turned][:, ::-1]
     return faces, int(flip.sum())
@@ -344,7 +385,20 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                 udf_source)
 
     results = run_tiles(mesh_tile, len(tiles), job, settings.workers, settings.scheduler,
-                        sub_progress(progress, 0.0, 0.95), cancel)
+                        sub_progress(progress, 0.0, 0.85), cancel)
+    # where a tile kept the other side of an open sheet than its neighbours, make it again
+    # keeping the side they kept: the two sides share no vertices along the border
+    turn = tiles_to_turn([(v, f) for v, f, _ in results], spacing)
+    if len(turn):
+        other = dataclasses.replace(meshing, other_side=not meshing.other_side)
+
+        def again(number: int) -> tuple:
+            return job(int(turn[number]))[:4] + (other, udf_source)
+
+        redone = run_tiles(mesh_tile, len(turn), again, settings.workers, settings.scheduler,
+                           sub_progress(progress, 0.85, 0.95), cancel)
+        for number, result in zip(turn, redone):
+            results[number] = result
     pieces = []
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
     patch_points = 0.0
@@ -366,7 +420,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                    "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
                    "udf_source": udf_source}
-    mesh_stats = {**stitched, **{f"cleanup_{k}": v for k, v in counts.items()},
+    mesh_stats = {**stitched, "tiles_turned": int(len(turn)), **{f"cleanup_{k}": v for k, v in counts.items()},
                   "iso": float(np.median(isos)) if isos else 0.0}
     progress(1.0, "tiles stitched")
     return vertices, faces.astype(np.int64), field_stats, mesh_stats

@@ -37,6 +37,8 @@ class MeshingSettings:
     lr: peak step of VectorAdam, voxels per iteration.
     normal_start: fraction of the iterations after which stage 2 (normal-constrained) starts.
     cut: keep one layer of the double cover (False keeps both layers).
+    other_side: keep the other layer of each piece (the one with the smaller area): a tile's
+        choice made to agree with its neighbours' (:mod:`engine.tiles`).
     min_component_faces: drop output pieces with fewer faces (0: no limit; specks, the crumbs
         a noisy cover leaves, go either way: see :func:`.cleanup.find_specks`).
     seed: kept for reproducible settings; the layer choice itself draws no random numbers.
@@ -52,6 +54,7 @@ class MeshingSettings:
     lr: float = LR
     normal_start: float = NORMAL_START
     cut: bool = True
+    other_side: bool = False
     min_component_faces: int = 0
     seed: int = 0
     device: str = "auto"
@@ -161,7 +164,8 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     start = time.perf_counter()
     progress(0.9, "choosing one layer")
     if settings.cut:
-        keep, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel)
+        keep, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel,
+                                   settings.other_side)
         kept, lips = peel_lips(verts, faces[keep])
         kept, flaps = drop_flaps(kept)
         kept, facing = drop_facing_pairs(verts, kept, field, h)

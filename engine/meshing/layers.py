@@ -234,7 +234,8 @@ def _drop_kept_twins(keep: np.ndarray, twin_f: np.ndarray, twin_g: np.ndarray,
 
 
 def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spacing: float,
-                 field=None, iso: float = 1.0, cancel: Optional[CancelFn] = None):
+                 field=None, iso: float = 1.0, cancel: Optional[CancelFn] = None,
+                 other_side: bool = False):
     """Choose the faces of the optimised cover that make one layer.
 
     Parameters
@@ -244,6 +245,8 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     spacing : voxel size, world units.
     field : UDFGrid or None, the distance field (tells a thin part from two layers of a sheet).
     iso : the marching-cubes level in voxels (layers that did not meet lie up to 2 iso apart).
+    other_side : keep, per tree, the label with the smaller area instead of the larger (a
+        tile whose neighbours kept the other side of an open sheet).
 
     Returns
     -------
@@ -269,7 +272,7 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     check_cancel(cancel)
     area_odd = np.bincount(labels, weights=start_area * parity, minlength=count)
     area_even = np.bincount(labels, weights=start_area * ~parity, minlength=count)
-    keep = parity == (area_odd > area_even)[labels]
+    keep = parity == ((area_odd > area_even) != other_side)[labels]
     _drop_kept_twins(keep, twin_f, twin_g, pairs)
     twinned = np.zeros(m, bool)
     twinned[twin_f] = twinned[twin_g] = True

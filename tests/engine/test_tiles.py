@@ -166,3 +166,31 @@ def test_cancel_stops_between_and_during_tiles(workers):
     # stopped well before the tiles were all made (a full run takes several times longer)
     assert max(f for f, _ in seen) < 0.9
     assert time.perf_counter() - started < 60
+
+
+def _grid_sheet(x0, x1, y1, step):
+    """A flat triangulated sheet on z = 0 over [x0, x1] x [0, y1], normals +z."""
+    xs, ys = np.arange(x0, x1 + 1e-9, step), np.arange(0.0, y1 + 1e-9, step)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    index = np.arange(gx.size).reshape(gx.shape)
+    a, b = index[:-1, :-1].ravel(), index[1:, :-1].ravel()
+    c, d = index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return vertices, faces
+
+
+def test_a_tile_that_kept_the_other_side_is_found_and_the_seam_welds():
+    from engine.tiles import stitch, tiles_to_turn
+
+    step = 1.0 / 64
+    left = _grid_sheet(-1.0, 0.0, 1.0, step)
+    right = _grid_sheet(0.0, 0.5, 1.0, step)  # the smaller piece ...
+    right = (right[0], right[1][:, ::-1])       # ... faces the other way
+    assert list(tiles_to_turn([left, right], step)) == [1]
+    vertices, faces, stats = stitch([left, right], step)
+    assert stats["flipped"] == 1
+    topo = edge_topology(faces)
+    middle = vertices[topo.edges[topo.counts == 1]].mean(axis=1)
+    assert not np.any(np.abs(middle[:, 0]) < 0.5 * step)  # no boundary left along x = 0
+    assert (topo.counts <= 2).all()
