@@ -106,21 +106,10 @@ def stitch(pieces, spacing: float):
         ``holes_closed``
     """
     from .meshing.layers import close_pinholes
-    from .meshing.mesh_ops import edge_topology, vertex_components
+    from .meshing.mesh_ops import vertex_components
 
-    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
-    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
-    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
-                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
+    vertices, faces, _, a, b = _joined(pieces, spacing)
     stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0}
-    if not len(faces):
-        return vertices, faces, stats
-    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
-
-    topo = edge_topology(faces)
-    rim = np.unique(topo.edges[topo.counts == 1])
-    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
-    a, b = rim[a], rim[b]
     if len(a):
         count, face_piece = vertex_components(len(vertices), faces)
         faces, stats["flipped"] = _agree_orientation(vertices, faces, face_piece, count, a, b)
@@ -139,22 +128,13 @@ def stitch(pieces, spacing: float):
 def tiles_to_turn(pieces, spacing: float) -> np.ndarray:
     """Indices of the tiles whose kept layer faces against their neighbours' across the
     borders (by the votes of :func:`_agree_orientation`): the smaller side, by area."""
-    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
+    from .meshing.mesh_ops import face_normals, vertex_components
 
-    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
-    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
-    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
-                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
-    if not len(faces):
-        return np.zeros(0, np.int64)
-    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
-    topo = edge_topology(faces)
-    rim = np.unique(topo.edges[topo.counts == 1])
-    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
+    vertices, faces, tile_of, a, b = _joined(pieces, spacing)
     if not len(a):
         return np.zeros(0, np.int64)
     count, face_piece = vertex_components(len(vertices), faces)
-    turned = _agree_orientation(vertices, faces, face_piece, count, rim[a], rim[b])[0]
+    turned = _agree_orientation(vertices, faces, face_piece, count, a, b)[0]
     flipped = turned[:, 0] != faces[:, 0]
     area = face_normals(vertices, faces)[1]
     if area[flipped].sum() > area[~flipped].sum():
@@ -163,6 +143,28 @@ def tiles_to_turn(pieces, spacing: float) -> np.ndarray:
     share = np.bincount(face_tile, weights=area * flipped, minlength=len(pieces))
     total = np.bincount(face_tile, weights=area, minlength=len(pieces))
     return np.flatnonzero(share > 0.5 * np.maximum(total, 1e-300))
+
+
+def _joined(pieces, spacing: float):
+    """The pieces as one unwelded mesh, and the boundary vertices to weld across tiles.
+
+    Returns ``vertices``, ``faces``, ``tile_of`` (the tile of each vertex) and the pairs
+    ``(a, b)`` of vertex indices to weld (see :func:`_pairs_across`).
+    """
+    from .meshing.mesh_ops import edge_topology
+
+    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
+    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
+    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
+                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
+    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
+    if not len(faces):
+        empty = np.zeros(0, np.int64)
+        return vertices, faces, tile_of, empty, empty
+    topo = edge_topology(faces)
+    rim = np.unique(topo.edges[topo.counts == 1])
+    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
+    return vertices, faces, tile_of, rim[a], rim[b]
 
 
 def _drop_ears(faces: np.ndarray, passes: int = 3):
@@ -254,9 +256,9 @@ def _mutual_nearest_across(points: np.ndarray, tile_of: np.ndarray, reach: float
 def _agree_orientation(vertices, faces, face_piece, count, a, b):
     """Turn over the pieces whose faces at welded pairs face against their neighbours'.
 
-    Each welded pair votes (its two vertices' mean normals agree or not) between the two
-    pieces it joins; a spanning forest over the pieces, strongest votes first, fixes each
-    piece's parity. ``face_piece`` (m,) numbers the pieces (``count`` of them) per face.
+    Each welded pair votes (the normals of the few rings around its two vertices agree or not)
+    between the two pieces it joins; a spanning forest over the pieces, strongest votes first,
+    fixes each piece's parity. ``face_piece`` (m,) numbers the pieces (``count`` of them) per face.
     Returns the faces (some rows reversed) and how many pieces were turned.
     """
     from scipy.sparse import coo_matrix
