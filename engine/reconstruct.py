@@ -188,8 +188,9 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
                            f"{why}; set outliers to 'keep' to use every point")
     elif outliers_found:
         share = 100.0 * outliers_found / given
-        messages.insert(0, f"kept {outliers_found:,} isolated points ({share:.2f} %): too few "
-                           f"to be outliers; set outliers to 'drop' to remove them")
+        points = "point" if outliers_found == 1 else "points"
+        messages.insert(0, f"kept {outliers_found:,} isolated {points} ({share:.2f} %): too "
+                           f"few to be outliers; set outliers to 'drop' to remove them")
     if detail.capped:
         messages.append(f"auto detail stops at {AUTO_MAX_CELLS} cells along the longest side "
                         f"({detail.voxel_size:.3g} units per cell); set Detail to Voxel Size for "
