@@ -15,6 +15,10 @@ face normals, and nearest neighbours are found in both directions with a k-d tre
   the first; this can. The ground truth's own share comes from its thin parts.
 * ``area_ratio``: prediction area / ground-truth area (a double layer doubles it, holes and
   retracted rims shrink it).
+* ``area_ratio_thin_once``: the same against the ground truth with its double-layered share
+  counted once, ``gt_area * (1 - gt_double_layer / 2)``: a part thinner than the layer distance
+  (a car's 8 mm floor pan at 1.7 cm cells) can only come out as one sheet from a field sampled
+  that coarsely, and then this is the ratio that reads 1.
 
 The sample count sets a floor: a mesh scored against itself does not get 0 (at 100k samples the
 CGAL bunny gives CD-L1 ×10² ≈ 0.24), so always state the count.
@@ -152,12 +156,16 @@ def double_layer_share(vertices: np.ndarray, faces: np.ndarray,
 def layer_scores(pred_vertices: np.ndarray, pred_faces: np.ndarray, gt_vertices: np.ndarray,
                  gt_faces: np.ndarray, distance: float = LAYER_DISTANCE,
                  seed: int = 0) -> Dict[str, float]:
-    """``double_layer``, ``gt_double_layer`` and ``area_ratio`` of a prediction (same units)."""
+    """``double_layer``, ``gt_double_layer``, ``area_ratio`` and ``area_ratio_thin_once`` of a
+    prediction (same units; see the module docstring)."""
     pred_area = _surface_area(Mesh(pred_vertices, pred_faces))
     gt_area = _surface_area(Mesh(gt_vertices, gt_faces))
+    gt_double = double_layer_share(gt_vertices, gt_faces, distance, seed)
+    thin_once = gt_area * (1.0 - gt_double / 2)
     return {"double_layer": double_layer_share(pred_vertices, pred_faces, distance, seed),
-            "gt_double_layer": double_layer_share(gt_vertices, gt_faces, distance, seed),
-            "area_ratio": pred_area / gt_area if gt_area > 0 else float("nan")}
+            "gt_double_layer": gt_double,
+            "area_ratio": pred_area / gt_area if gt_area > 0 else float("nan"),
+            "area_ratio_thin_once": pred_area / thin_once if thin_once > 0 else float("nan")}
 
 
 def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
@@ -181,7 +189,8 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
     -------
     dict
         ``cd_l1_x100``, ``cd_l2``, ``f1_0.005``, ``f1_0.01``, ``nc`` (floats, distances in the unit
-        frame), ``double_layer``, ``gt_double_layer`` and ``area_ratio`` (:func:`layer_scores`),
+        frame), ``double_layer``, ``gt_double_layer``, ``area_ratio`` and ``area_ratio_thin_once``
+        (:func:`layer_scores`),
         ``empty`` (bool, True when the prediction has no surface to sample; then the
         Chamfer distances are inf and F-scores and NC 0), ``samples`` (int, the count per mesh)
         and ``pred_faces`` (int).
@@ -204,7 +213,7 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
         worst = {"cd_l1_x100": float("inf"), "cd_l2": float("inf")}
         worst.update({f1_key(t): 0.0 for t in DEFAULT_THRESHOLDS})
         worst["nc"] = 0.0
-        worst.update({"double_layer": 0.0, "area_ratio": 0.0,
+        worst.update({"double_layer": 0.0, "area_ratio": 0.0, "area_ratio_thin_once": 0.0,
                       "gt_double_layer": double_layer_share(frame.to_unit(np.asarray(
                           gt.vertices, dtype=np.float64)), gt.faces, layer_distance, seed)})
         return {**worst, **info, "empty": True}

@@ -149,34 +149,99 @@ def make_input(gt: Mesh, domain: str, condition: Union[str, ScanCondition],
     return PointCloud(points, normals)
 
 
-def crop_to_input(mesh: Mesh, points: np.ndarray, max_dist: float = 0.01) -> Mesh:
-    """The faces of ``mesh`` that the input saw: the scored ground truth for scanned rooms.
+def crop_to_input(mesh: Mesh, points: np.ndarray, max_dist: float = 0.01,
+                  normals: np.ndarray = None) -> Mesh:
+    """The part of ``mesh`` that the input saw: the scored ground truth for scanned rooms.
 
-    A face is kept when any of its corners, edge midpoints or centroid lies within ``max_dist``
-    (unit frame) of an input point, as the CAP-UDF / ScanNet protocols drop ground truth far from
-    the scan. Faces are not split, so the crop is as fine as the mesh (rooms: 8 cm cells, i.e.
-    0.013-0.023 in the unit frame). Unused vertices are dropped.
+    The faces near the input are split until no edge is longer than ``max_dist / 2``, then a face
+    is kept when any of its corners, edge midpoints or centroid lies within ``max_dist`` (unit
+    frame) of an input point, as the CAP-UDF / ScanNet protocols drop ground truth far from the
+    scan. The split makes the crop follow the scan's own edge to within ``max_dist / 2`` whatever
+    the mesh's cells (rooms: 8 cm cells, 0.013-0.023 in the unit frame). With ``normals`` (the
+    scan's, one per point) only points of the face's own surface count, ``|cos| > 0.7`` between
+    the point's normal and the face's: the floor hidden under a cabinet, within ``max_dist`` of
+    the cabinet's seen sides, is no surface the scan saw. Unused vertices are dropped.
 
     Parameters
     ----------
     mesh : the full ground truth
     points : (N, 3) the input cloud, same frame
     max_dist : distance threshold, same units
+    normals : (N, 3) the input's normals, optional
 
     Returns
     -------
-    Mesh with a subset of the faces; vertices (V', 3), faces (F', 3) int64
+    Mesh with a subset of the (split) faces; vertices (V', 3), faces (F', 3) int64
     """
     from scipy.spatial import cKDTree
 
-    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    points = np.asarray(points, dtype=np.float64)
+    tree = cKDTree(points)
+    v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    f = f[_near(v, f, tree, max_dist)]  # a face far from every point has no part near one
+    v, f = split_long_edges(v, f, max_dist / 2)
+    f = f[_near(v, f, tree, max_dist, None if normals is None else np.asarray(normals))]
+    used, inverse = np.unique(f, return_inverse=True)
+    return Mesh(v[used], inverse.reshape(-1, 3).astype(np.int64))
+
+
+_SAME_SURFACE_COS = 0.7
+_SAME_SURFACE_NEIGHBOURS = 8
+
+
+def _near(v: np.ndarray, f: np.ndarray, tree, max_dist: float,
+          normals: np.ndarray = None) -> np.ndarray:
+    """Per face: one of its corners, edge midpoints or centroid lies within ``max_dist`` of a
+    point (with ``normals``: of one of the 8 nearest points whose normal is the face's)."""
+    if len(f) == 0:
+        return np.zeros(0, bool)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     probes = np.stack([a, b, c, (a + b) / 2, (b + c) / 2, (c + a) / 2, (a + b + c) / 3], 1)
-    tree = cKDTree(np.asarray(points))
-    dist, _ = tree.query(probes.reshape(-1, 3), distance_upper_bound=max_dist)
-    keep = (dist.reshape(-1, 7) <= max_dist).any(axis=1)
-    used, inverse = np.unique(f[keep], return_inverse=True)
-    return Mesh(v[used], inverse.reshape(-1, 3).astype(np.int64))
+    reach = max_dist + np.linalg.norm(probes - probes[:, 6:7], axis=2).max(axis=1)
+    dist, _ = tree.query(probes[:, 6], distance_upper_bound=float(reach.max()))
+    maybe = np.flatnonzero(dist <= reach)  # the centroid test prunes before the 7 probes
+    keep = np.zeros(len(f), bool)
+    if normals is None:
+        dist, _ = tree.query(probes[maybe].reshape(-1, 3), distance_upper_bound=max_dist)
+        keep[maybe] = (dist.reshape(-1, 7) <= max_dist).any(axis=1)
+        return keep
+    k = _SAME_SURFACE_NEIGHBOURS
+    dist, idx = tree.query(probes[maybe].reshape(-1, 3), k=k, distance_upper_bound=max_dist)
+    face_normal = np.cross(b - a, c - a)[maybe]
+    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
+    found = dist.reshape(-1, 7, k) <= max_dist
+    point_normal = normals[np.where(found, idx.reshape(-1, 7, k), 0)]
+    same = np.abs(np.einsum("fpkc,fc->fpk", point_normal, face_normal)) > _SAME_SURFACE_COS
+    keep[maybe] = (found & same).any(axis=(1, 2))
+    return keep
+
+
+def split_long_edges(v: np.ndarray, f: np.ndarray, max_edge: float):
+    """Split faces 1 -> 4 at their edge midpoints until no edge is longer than ``max_edge``.
+
+    A face whose longest edge is too long is split at its three midpoints. A neighbour across
+    one of its shorter edges may stay whole, so the result can have T-junctions: it keeps the
+    area and the shape, which is what cropping and scoring need, not a watertight topology.
+    Returns (vertices, faces), the old vertices first.
+    """
+    v, f = np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+    while len(f):
+        corners = v[f]
+        longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+        big = longest > max_edge
+        if not big.any():
+            break
+        split = f[big]
+        edges = np.sort(np.concatenate([split[:, [0, 1]], split[:, [1, 2]], split[:, [2, 0]]]),
+                        axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mids = len(v) + inverse.ravel().reshape(3, -1)
+        v = np.concatenate([v, (v[unique[:, 0]] + v[unique[:, 1]]) / 2])
+        a, b, c = split.T
+        ab, bc, ca = mids
+        f = np.concatenate([f[~big], np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1),
+                            np.stack([ca, bc, c], 1), np.stack([ab, bc, ca], 1)])
+    return v, f
 
 
 def shared_dir() -> str:

@@ -24,8 +24,9 @@ The method gets the input points only (``PointCloud(points)``): the dataset's ex
 withheld, so every method estimates what it needs.
 
 Rooms are scanned scenes: faces no scan point saw are not scored. When the dataset provides
-``crop_to_input(mesh, points, max_dist)``, the ground truth is cropped to the faces within
-``crop_max_dist`` (default 0.01, the dataset's default) of the *clean* scan of the same room, so
+``crop_to_input(mesh, points, max_dist, normals)``, the ground truth is cropped to the surface
+within ``crop_max_dist`` (default 0.01, the dataset's default) of the *clean* scan of the same room
+and facing the way its points do (the scan's normals), so
 every condition is scored against the same visible ground truth, and the prediction is cropped to
 the faces within the same distance of the method's own input (CAP-UDF's ``remove_far``; pieces
 grown around outliers stay and are scored). The result's ``protocol`` records it.
@@ -46,7 +47,7 @@ from engine.geometry import Mesh, PointCloud
 from engine.metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
 
 METRIC_KEYS = ("cd_l1_x100", "cd_l2") + tuple(f1_key(t) for t in DEFAULT_THRESHOLDS) + ("nc",)
-LAYER_KEYS = ("double_layer", "gt_double_layer", "area_ratio")
+LAYER_KEYS = ("double_layer", "gt_double_layer", "area_ratio", "area_ratio_thin_once")
 CROP_DOMAINS = ("rooms",)
 DEFAULT_CROP_MAX_DIST = 0.01
 _CLEAR_REFS = "/proc/self/clear_refs"
@@ -129,18 +130,18 @@ def _worst_scores() -> Dict[str, float]:
 
 
 def _score(pred: Mesh, gt: Mesh, samples: int, seed: int, crop: Optional[Callable] = None,
-           crop_max_dist: float = DEFAULT_CROP_MAX_DIST, visible_points: np.ndarray = None,
+           crop_max_dist: float = DEFAULT_CROP_MAX_DIST, visible: PointCloud = None,
            input_points: np.ndarray = None) -> dict:
     """Metrics of ``pred`` against ``gt`` in the full ground truth's unit frame.
 
-    With ``crop``, the ground truth is cropped to ``visible_points`` and the prediction to
-    ``input_points`` (see the module docstring).
+    With ``crop``, the ground truth is cropped to the ``visible`` scan (its points and normals)
+    and the prediction to ``input_points`` (see the module docstring).
     """
     from engine.frame import UnitFrame
 
     frame = UnitFrame.from_points(np.asarray(gt.vertices, dtype=np.float64))
     if crop is not None:
-        gt = crop(gt, visible_points, crop_max_dist)
+        gt = crop(gt, visible.points, crop_max_dist, visible.normals)
         if len(np.asarray(pred.faces).reshape(-1, 3)):
             pred = crop(pred, input_points, crop_max_dist)
     return evaluate(pred, gt, samples=samples, seed=seed, frame=frame)
@@ -261,7 +262,7 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
     gt = dataset.make_shape(domain, shape_seed)
     cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
     crop = dataset.crop_to_input if cropped else None
-    visible = dataset.make_input(gt, domain, "clean", shape_seed).points if cropped else None
+    visible = dataset.make_input(gt, domain, "clean", shape_seed) if cropped else None
     row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False, "error": None,
            "run_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     pred = None
@@ -404,7 +405,7 @@ def _fmt(value, digits: int) -> str:
 
 
 TABLE_HEADER = ("| method | domain | condition | N | failed | CD-L1 ×10² | F1@0.005 | F1@0.01 "
-                "| NC | double % (GT %) | area ratio | s/shape | peak MB |\n"
+                "| NC | double % (GT %) | area ratio (thin parts once) | s/shape | peak MB |\n"
                 "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
@@ -413,6 +414,14 @@ def _layers(summary: dict) -> str:
     if summary.get("double_layer") is None:
         return "–"
     return (f"{100 * summary['double_layer']:.1f} ({100 * summary['gt_double_layer']:.1f})")
+
+
+def _area(summary: dict) -> str:
+    """``area ratio (thin parts once)``, the second left out for rows scored without it."""
+    ratio = _fmt(summary.get("area_ratio"), 3)
+    if summary.get("area_ratio_thin_once") is None:
+        return ratio
+    return f"{ratio} ({_fmt(summary['area_ratio_thin_once'], 3)})"
 
 
 def table_row(result: dict) -> str:
@@ -424,7 +433,7 @@ def table_row(result: dict) -> str:
     return (f"| {result['method']} | {result['domain']} | {result['condition']} | {s['n']} "
             f"| {failed} | {_fmt(s['cd_l1_x100'], 3)} | {_fmt(s[f1_key(0.005)], 3)} "
             f"| {_fmt(s[f1_key(0.01)], 3)} | {_fmt(s['nc'], 3)} | {_layers(s)} "
-            f"| {_fmt(s.get('area_ratio'), 3)} | {_fmt(s['seconds'], 1)} "
+            f"| {_area(s)} | {_fmt(s['seconds'], 1)} "
             f"| {_fmt(s['peak_rss_mb'], 0)} |")
 
 

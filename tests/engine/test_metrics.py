@@ -178,7 +178,8 @@ def test_cli_prints_one_json_object(tmp_path, capsys):
     out = capsys.readouterr().out
     result = json.loads(out)  # the whole of stdout is one JSON object
     assert set(result) == set(KEYS) | {"empty", "samples", "pred_faces", "double_layer",
-                                        "gt_double_layer", "area_ratio"}
+                                        "gt_double_layer", "area_ratio",
+                                        "area_ratio_thin_once"}
     assert result["cd_l1_x100"] == pytest.approx(2.0, rel=0.03)
     assert result["samples"] == 20000 and result["empty"] is False
 
@@ -217,3 +218,25 @@ def test_double_layer_share_sees_a_second_layer():
     single = evaluate(Mesh(v, f), Mesh(v, f), samples=20000, layer_distance=1 / 64)
     assert single["double_layer"] == 0.0 and single["area_ratio"] == pytest.approx(1.0)
     assert scores["cd_l1_x100"] < 1.2 * single["cd_l1_x100"]  # CD is blind to it
+
+
+def test_area_ratio_thin_once_reads_one_for_a_thin_part_made_one_sheet():
+    """A plate thinner than the layer distance: the truth has both sides (double-layered), the
+    reconstruction one sheet. The plain area ratio reads 0.5, the thin-once ratio 1; a truth
+    with no thin part gives the two ratios alike."""
+    from engine.metrics import layer_scores
+
+    g = np.linspace(0.0, 1.0, 41)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    v = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    idx = np.arange(x.size).reshape(41, 41)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    f = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    plate_v = np.vstack([v, v + [0.0, 0.0, 0.001]])
+    plate_f = np.vstack([f[:, ::-1], f + len(v)])  # bottom faces down, top faces up
+    scores = layer_scores(v, f, plate_v, plate_f, distance=0.004)
+    assert scores["gt_double_layer"] > 0.95 and scores["double_layer"] == 0.0
+    assert scores["area_ratio"] == pytest.approx(0.5, rel=0.01)
+    assert scores["area_ratio_thin_once"] == pytest.approx(1.0, rel=0.03)
+    alone = layer_scores(v, f, v, f, distance=0.004)
+    assert alone["area_ratio"] == pytest.approx(1.0) == alone["area_ratio_thin_once"]

@@ -58,7 +58,7 @@ def fake_dataset(crop=False):
         points, _, _ = sample_surface(gt.vertices, gt.faces, 2000, np.random.default_rng(seed))
         return PointCloud(points)
 
-    def crop_to_input(mesh, points, max_dist):
+    def crop_to_input(mesh, points, max_dist, normals=None):
         from scipy.spatial import cKDTree
         dist, _ = cKDTree(points).query(mesh.vertices)
         keep = (dist[mesh.faces] <= max_dist).all(axis=1)

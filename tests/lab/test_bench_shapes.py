@@ -9,6 +9,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from engine.geometry import Mesh
 from engine.sampling import face_areas_and_normals
 from lab.bench import dataset
 from lab.bench.dataset import (CONDITIONS, DOMAINS, crop_to_input, make_input, make_shape,
@@ -137,12 +138,12 @@ def test_room_viewpoints_are_inside_the_room():
 def test_crop_keeps_only_faces_near_the_scan(scanned_room):
     _, gt, cloud = scanned_room
     crop = crop_to_input(gt, cloud.points, 0.01)
-    assert 0 < len(crop.faces) < len(gt.faces)
+    assert 0 < _area(crop) < _area(gt)
     centroids = crop.vertices[crop.faces].mean(axis=1)
     farthest = cKDTree(cloud.points).query(centroids)[0].max()
     corners = crop.vertices[crop.faces]
     edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()
-    assert farthest <= 0.01 + edge
+    assert edge <= 0.005 and farthest <= 0.01 + edge  # split to max_dist / 2, then cropped
 
 
 def test_uneven_object_scan_is_deterministic_with_the_count():
@@ -188,3 +189,38 @@ def test_real_shapes_load_in_the_unit_frame():
     for _, mesh in shapes:
         extent = np.ptp(mesh.vertices, axis=0)
         assert abs(extent.max() - 1.0) < 1e-9 and len(mesh.faces) > 0
+
+
+def _square(size=1.0):
+    """A square of two triangles in z = 0, facing +z."""
+    v = np.array([[0, 0, 0], [size, 0, 0], [size, size, 0], [0, size, 0]], float)
+    return Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
+
+
+def _area(mesh):
+    corners = mesh.vertices[mesh.faces]
+    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1).sum()
+
+
+def test_crop_follows_the_scan_not_the_mesh_cells():
+    """Points on the left half of a square of two big triangles: the crop keeps the left half and
+    a margin of at most max_dist, not the whole triangles the points touch."""
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0, 0.5, 20000), rng.uniform(0, 1, 20000),
+                              np.zeros(20000)])
+    crop = crop_to_input(_square(), points, 0.01)
+    assert 0.5 <= _area(crop) <= 0.5 + 0.01 + 0.002
+
+
+def test_crop_with_normals_leaves_out_the_surface_hidden_beside_a_seen_one():
+    """A wall stands on the floor; the scan saw the wall only. Without normals the floor strip
+    within max_dist of the wall's foot is kept; with the scan's normals it is not seen."""
+    rng = np.random.default_rng(1)
+    points = np.column_stack([np.full(20000, 0.5), rng.uniform(0, 1, 20000),
+                              rng.uniform(0, 0.5, 20000)])
+    normals = np.tile([1.0, 0.0, 0.0], (len(points), 1))
+    blind = crop_to_input(_square(), points, 0.01)
+    assert _area(blind) >= 0.015  # a strip of about 2 x 0.01 along the foot
+    seen = crop_to_input(_square(), points, 0.01, normals)
+    assert len(seen.faces) == 0
