@@ -18,7 +18,10 @@ UDF when the points lie on the surface. Band nodes farther than ``NETWORK_BAND_N
 spacings from every input point also keep their nearest-point distance: the mesher's iso-level
 is at most 2 spacings and its vertices end on the zero level, so only the nodes near the
 surface need the network's accuracy (at resolution 256 this skips about a third
-of the band). Every other node is farther than R from all input points and holds R: the field is
+of the band). Where the cloud is sparse, points farther apart than those spacings (the far walls
+of a room scan at 256), nodes up to ``SPARSE_BAND_NODES`` spacings away get the network too, as
+far out as their nearest point's 4th neighbour: a nearest-point distance there rises above the
+iso-level between the samples and left holes in the mesh. Every other node is farther than R from all input points and holds R: the field is
 the UDF truncated at R, which is all the mesher needs.
 
 ``udf_source="nearest"`` replaces the network by the distance to the nearest input point: the
@@ -51,6 +54,11 @@ SPARSE_WIDENING = (1.5, 2.0, 3.0)
 # Band nodes farther than this many spacings from every input point keep the nearest-point
 # distance (an upper bound) instead of the network's value: above the mesher's iso-level (<= 2).
 NETWORK_BAND_NODES = 3.0
+# ... unless the cloud is sparse there: a node up to this many spacings from its nearest point
+# still gets the network's value when that point's 4th-nearest neighbour is at least as far
+# (between the lines of a sparse scan the surface runs farther from every point than 3 spacings).
+SPARSE_BAND_NODES = 5.0
+SPARSE_NEIGHBOUR = 4
 # Margin beyond the band radius on each side of the grid, in nodes.
 MARGIN_NODES = 3
 # The band is at least this many spacings wide, so that the mesher sees a few nodes of true
@@ -259,7 +267,7 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
 
     started = time.perf_counter()
     if use_network:
-        near = nearest <= NETWORK_BAND_NODES * spacing
+        near = _network_nodes(tree, points, origin, indices, nearest, spacing)
         stats["network_queries"] = int(near.sum())
         values = nearest.astype(np.float32)
         values[near] = _network_values(points, tree, origin + indices[near] * spacing,
@@ -273,6 +281,19 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     grid = UDFGrid.from_band(indices, values, shape, origin, spacing, far_value=band_radius)
     progress(1.0, "field done")
     return BandField(grid, stats)
+
+
+def _network_nodes(tree, points: np.ndarray, origin: np.ndarray, indices: np.ndarray,
+                   nearest: np.ndarray, spacing: float) -> np.ndarray:
+    """The band nodes that get the network's value (see ``NETWORK_BAND_NODES``)."""
+    near = nearest <= NETWORK_BAND_NODES * spacing
+    gap = np.flatnonzero(~near & (nearest <= SPARSE_BAND_NODES * spacing))
+    if len(gap) and len(points) > SPARSE_NEIGHBOUR:
+        _, owner = tree.query(origin + indices[gap] * spacing)
+        owners, which = np.unique(owner, return_inverse=True)
+        local, _ = tree.query(points[owners], k=[SPARSE_NEIGHBOUR + 1])
+        near[gap] = nearest[gap] <= local[which.ravel(), 0]
+    return near
 
 
 def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.ndarray,

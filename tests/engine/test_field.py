@@ -189,3 +189,35 @@ def test_an_isolated_point_keeps_the_nearest_point_distance():
     nodes = node_positions(band.grid)[flat]
     centre = np.linalg.norm(nodes, axis=1) < 0.02
     np.testing.assert_allclose(values[centre], np.linalg.norm(nodes[centre], axis=1), rtol=1e-5)
+
+
+def _lattice_square(step, half=0.3):
+    """Points of the square [-half, half]^2 in z = 0 on a lattice of ``step``."""
+    g = np.arange(-half, half + 1e-9, step)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    return np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+
+
+def test_a_sparse_scan_is_meshed_without_holes_between_its_samples():
+    """A square sampled every 4.5 spacings (at 128): midway between four samples the surface is
+    3.2 spacings from every point. The network is asked there as well, and the mesh covers the
+    square; a dense square gets no more network queries than the 3-spacing band."""
+    from engine.field import NETWORK_BAND_NODES, _network_nodes, find_band, grid_layout
+    from engine.meshing import extract_surface
+    from engine.sampling import face_areas_and_normals
+
+    settings = ReconstructSettings(resolution=128)
+    sparse = _lattice_square(4.5 / 128)
+    band = compute_udf_band(sparse, settings)
+    mesh = extract_surface(band.grid).mesh
+    inside = (np.abs(mesh.vertices[:, :2]) <= 0.3).all(axis=1)[mesh.faces].all(axis=1)
+    area = face_areas_and_normals(mesh.vertices, mesh.faces[inside])[0].sum()
+    assert area >= 0.97 * 0.6 ** 2
+
+    for points, widened in ((sparse, True), (_lattice_square(0.5 / 128), False)):
+        tree, h = cKDTree(points), 1 / 128
+        shape, origin, _ = grid_layout(points, 128, 6 * h)
+        indices, nearest = find_band(tree, points, shape, origin, h, 6 * h)
+        asked = _network_nodes(tree, points, origin, indices, nearest, h)
+        three = nearest <= NETWORK_BAND_NODES * h
+        assert (asked >= three).all() and (asked.sum() > three.sum()) == widened
