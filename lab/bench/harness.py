@@ -47,7 +47,8 @@ from engine.geometry import Mesh, PointCloud
 from engine.metrics import DEFAULT_THRESHOLDS, evaluate, f1_key
 
 METRIC_KEYS = ("cd_l1_x100", "cd_l2") + tuple(f1_key(t) for t in DEFAULT_THRESHOLDS) + ("nc",)
-LAYER_KEYS = ("double_layer", "gt_double_layer", "area_ratio", "area_ratio_thin_once")
+LAYER_KEYS = ("double_layer", "gt_double_layer", "gt_close_sheets", "area_ratio",
+              "area_ratio_thin_once")
 CROP_DOMAINS = ("rooms",)
 DEFAULT_CROP_MAX_DIST = 0.01
 _CLEAR_REFS = "/proc/self/clear_refs"

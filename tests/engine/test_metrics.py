@@ -178,8 +178,8 @@ def test_cli_prints_one_json_object(tmp_path, capsys):
     out = capsys.readouterr().out
     result = json.loads(out)  # the whole of stdout is one JSON object
     assert set(result) == set(KEYS) | {"empty", "samples", "pred_faces", "double_layer",
-                                        "gt_double_layer", "area_ratio",
-                                        "area_ratio_thin_once"}
+                                        "gt_double_layer", "gt_close_sheets",
+                                        "area_ratio", "area_ratio_thin_once"}
     assert result["cd_l1_x100"] == pytest.approx(2.0, rel=0.03)
     assert result["samples"] == 20000 and result["empty"] is False
 
@@ -222,8 +222,9 @@ def test_double_layer_share_sees_a_second_layer():
 
 def test_area_ratio_thin_once_reads_one_for_a_thin_part_made_one_sheet():
     """A plate thinner than the layer distance: the truth has both sides (double-layered), the
-    reconstruction one sheet. The plain area ratio reads 0.5, the thin-once ratio 1; a truth
-    with no thin part gives the two ratios alike."""
+    reconstruction one sheet. The plain area ratio reads 0.5, the thin-once ratio 1; so too for
+    a pocket, a sheet lying the same way up half a distance above another. A truth with no
+    close sheets gives the two ratios alike."""
     from engine.metrics import layer_scores
 
     g = np.linspace(0.0, 1.0, 41)
@@ -240,3 +241,10 @@ def test_area_ratio_thin_once_reads_one_for_a_thin_part_made_one_sheet():
     assert scores["area_ratio_thin_once"] == pytest.approx(1.0, rel=0.03)
     alone = layer_scores(v, f, v, f, distance=0.004)
     assert alone["area_ratio"] == pytest.approx(1.0) == alone["area_ratio_thin_once"]
+    assert alone["gt_close_sheets"] == 0.0
+
+    pocket_v = np.vstack([v, v + [0.0, 0.0, 0.002]])  # the same way up, half a distance above
+    pocket = layer_scores(v, f, pocket_v, np.vstack([f, f + len(v)]), distance=0.004)
+    assert pocket["gt_double_layer"] == 0.0 and pocket["gt_close_sheets"] > 0.95
+    assert pocket["area_ratio"] == pytest.approx(0.5, rel=0.01)
+    assert pocket["area_ratio_thin_once"] == pytest.approx(1.0, rel=0.03)
