@@ -21,8 +21,9 @@ surface need the network's accuracy (at resolution 256 this skips about a third
 of the band). Where the cloud is sparse, points farther apart than those spacings (the far walls
 of a room scan at 256), nodes up to ``SPARSE_BAND_NODES`` spacings away get the network too, as
 far out as their nearest point's 4th neighbour: a nearest-point distance there rises above the
-iso-level between the samples and left holes in the mesh. Every other node is farther than R from all input points and holds R: the field is
-the UDF truncated at R, which is all the mesher needs.
+iso-level between the samples and left holes in the mesh. Every other node is farther than R
+from all input points and holds R: the field is the UDF truncated at R, which is all the mesher
+needs.
 
 ``udf_source="nearest"`` replaces the network by the distance to the nearest input point: the
 non-learned baseline, exact on the band up to the sampling gaps of the cloud.
