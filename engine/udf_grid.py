@@ -150,6 +150,14 @@ class UDFGrid:
         out[band_flat[lo:hi] - x0 * ny * nz] = band_values[lo:hi]
         return out.reshape(x1 - x0, ny, nz)
 
+    def band(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The nodes that hold a value of their own: index triples (M, 3) and distances (M,)
+        (every node of a dense grid)."""
+        if self._dense is not None:
+            return np.argwhere(np.ones(self.shape, bool)), self._dense.reshape(-1).copy()
+        band_flat, band_values = self._band
+        return np.stack(np.unravel_index(band_flat, self.shape), axis=1), band_values.copy()
+
     def _small_nodes(self, limit: float) -> np.ndarray:
         """Index triples (M, 3) of the nodes with distance below ``limit``."""
         if self._dense is not None:

@@ -29,8 +29,9 @@ REFERENCE_LABEL = "{method} (reference)"
 def add_arguments(parser) -> None:
     """Register the command's arguments on an ``argparse`` parser."""
     parser.add_argument("--method", default="ours",
-                        help="poisson, ours, nearest-udf, or ground-truth (the GT itself: the "
-                             "metrics' sampling floor) (default ours)")
+                        help="poisson, ours, nearest-udf, truth-udf (our mesher on the GT's "
+                             "exact distances: the mesher's floor), or ground-truth (the GT "
+                             "itself: the metrics' sampling floor) (default ours)")
     parser.add_argument("--radius-mode", default="fixed", choices=RADIUS_MODES,
                         help="radius mode of ours (default fixed)")
     parser.add_argument("--radius", type=float, default=None,
@@ -90,7 +91,7 @@ def _factory(args, name: str, radius_mode: str):
     from .methods import make_method
 
     options = {}
-    if name in ("ours", "nearest-udf"):
+    if name in ("ours", "nearest-udf", "truth-udf"):
         options = {"resolution": args.resolution, "device": args.device}
         if name == "ours":
             options["radius_mode"] = radius_mode
@@ -132,12 +133,13 @@ def run(args) -> int:
         print(f"{args.method}: not available: {error}", file=sys.stderr)
         return 1
     name = "ground-truth" if oracle else method.__name__
+    given_truth = oracle or getattr(method, "needs_ground_truth", False)
     results = []
     for condition in conditions:
         for domain in domains:
             result = run_benchmark(method, domain, condition, args.count, seed=args.sample_seed,
                                    samples=args.samples, progress=progress, name=name,
-                                   pass_ground_truth=oracle, jobs=1 if oracle else args.jobs,
+                                   pass_ground_truth=given_truth, jobs=1 if oracle else args.jobs,
                                    method_factory=factory,
                                    earlier=_earlier(args, name, domain, condition))
             path = write_json(result, args.out)

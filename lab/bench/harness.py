@@ -173,8 +173,8 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
         ``crop_to_input``; default :mod:`lab.bench.dataset` (tests pass a small stand-in).
         The method is given ``PointCloud(points)`` only (no normals, no colours).
     crop_max_dist : distance of the rooms crop (unit frame)
-    pass_ground_truth : call ``method(cloud, gt)`` instead; only for :func:`ground_truth`, the
-        sampling floor (a perfect reconstruction's scores)
+    pass_ground_truth : call ``method(cloud, gt)`` instead: for :func:`ground_truth`, the
+        sampling floor (a perfect reconstruction's scores), and ``truth-udf``, the mesher's
     jobs : shapes run at once, each in its own process (default 1: in this process). Every
         shape's input, method and scoring are seeded alone, so the scores do not depend on
         ``jobs``; the seconds and memory are each process's own. Needs ``method_factory`` and the

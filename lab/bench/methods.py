@@ -14,6 +14,8 @@
   :class:`engine.settings.ReconstructSettings`.
 * ``nearest-udf``: ``ours`` with the non-learned nearest-point distance as the UDF
   (``reconstruct(..., udf_source="nearest")``).
+* ``truth-udf``: ``ours``' band and mesher on the ground truth's exact distances: the mesher's
+  own floor (:mod:`lab.bench.truth_udf`; it is given the ground truth).
 
 A method that is not available (a missing package or engine module, an unsupported mode) raises
 :class:`MethodUnavailable` from its factory or on its first call.
@@ -188,10 +190,19 @@ def make_nearest_udf(resolution: int = 256, device: str = "auto", **settings) ->
                      udf_source="nearest", **settings)
 
 
+def make_truth_udf(resolution: int = 256, device: str = "auto", **settings):
+    """``ours``' band and mesher on the ground truth's exact distances (:mod:`.truth_udf`); the
+    callable takes ``(cloud, gt)`` and says so with ``needs_ground_truth``."""
+    from .truth_udf import make_truth_udf as make
+
+    return make(resolution=resolution, device=device, **settings)
+
+
 METHODS: Dict[str, Callable[..., Method]] = {
     "poisson": make_poisson,
     "ours": make_ours,
     "nearest-udf": make_nearest_udf,
+    "truth-udf": make_truth_udf,
 }
 
 
