@@ -21,7 +21,7 @@ import sys
 from engine.settings import DEVICES, RADIUS_MODES
 
 CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
-DOMAIN_NAMES = ("cars", "garments", "rooms")
+DOMAIN_NAMES = ("cars", "garments", "rooms")  # "all"; "real" (REAL_SHAPES) only by name
 TABLE_MODES = RADIUS_MODES
 REFERENCE_LABEL = "{method} (reference)"
 
@@ -37,7 +37,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--radius", type=float, default=None,
                         help="ball radius of ours in fixed mode, unit frame (default: the "
                              "engine's, 0.018); results are then named ours-r<radius>")
-    parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("all",))
+    parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("real", "all"),
+                        help="a domain of test shapes, all three, or real: the real meshes of "
+                             "lab.bench.dataset.REAL_SHAPES, sampled like the objects")
     parser.add_argument("--condition", default="all", choices=CONDITION_NAMES + ("all",))
     parser.add_argument("--count", type=int, default=20, help="test shapes per domain (default 20)")
     parser.add_argument("--jobs", type=int, default=1,

@@ -21,6 +21,7 @@ from .shapes.garments import make_garment
 from .shapes.rooms import build_room, room_layout
 
 DOMAINS = ("cars", "garments", "rooms")
+REAL = "real"  # the bench's out-of-domain set: the meshes of REAL_SHAPES, by index
 
 REAL_SHAPES = ("cgal/bunny00.off", "cgal/fandisk.off", "cgal/mushroom.off", "cgal/horizons.off",
                "cgal/elephant-with-holes.off", "cgal/ChineseDragon-10kv.off", "scans/owl.ply",
@@ -56,14 +57,18 @@ CONDITIONS: Dict[str, ScanCondition] = {
 }
 
 
-def _check_domain(domain: str) -> None:
-    if domain not in DOMAINS:
-        raise ValueError(f"unknown domain {domain!r}; choose one of {', '.join(DOMAINS)}")
+def _check_domain(domain: str, real: bool = False) -> None:
+    if domain not in DOMAINS and not (real and domain == REAL):
+        names = DOMAINS + ((REAL,) if real else ())
+        raise ValueError(f"unknown domain {domain!r}; choose one of {', '.join(names)}")
 
 
 def test_seeds(domain: str, count: int = 100) -> List[int]:
-    """Seeds of the test shapes of ``domain``: 1 000 000 + i, never a train seed."""
-    _check_domain(domain)
+    """Seeds of the test shapes of ``domain``: 1 000 000 + i, never a train seed; for ``real``,
+    the indices of ``REAL_SHAPES`` (at most all of them)."""
+    _check_domain(domain, real=True)
+    if domain == REAL:
+        return list(range(min(count, len(REAL_SHAPES))))
     return [_TEST_SEED_BASE + i for i in range(count)]
 
 
@@ -90,9 +95,11 @@ def make_shape(domain: str, seed: int) -> Mesh:
     Mesh
         vertices (V, 3) float64 in [-0.5, 0.5] (longest side exactly 1), faces (F, 3) int64;
         cars: closed overlapping parts; garments: open tubes and layers; rooms: one-sided sheets
-        and furniture, z up.
+        and furniture, z up; real: the ``seed``-th mesh of ``REAL_SHAPES``.
     """
-    _check_domain(domain)
+    _check_domain(domain, real=True)
+    if domain == REAL:
+        return real_shape(seed)
     if domain == "cars":
         vertices, faces = make_car(seed)
     elif domain == "garments":
@@ -118,7 +125,7 @@ def make_input(gt: Mesh, domain: str, condition: Union[str, ScanCondition],
     """The input cloud for ``gt`` (from ``make_shape(domain, seed)``) under ``condition`` (a name
     in ``CONDITIONS`` or a condition of one's own, e.g. the selector's dense training scans).
 
-    Cars and garments: ``count`` area-uniform samples. Rooms: a virtual scan from the room's
+    Cars, garments and real meshes: ``count`` area-uniform samples. Rooms: a virtual scan from the room's
     2-4 scanner positions (density falls off with distance, occluded parts are missing). Then
     Gaussian noise or outliers as the condition says.
 
@@ -128,7 +135,7 @@ def make_input(gt: Mesh, domain: str, condition: Union[str, ScanCondition],
         points (count, 3) float64 in the unit frame; normals (count, 3) float64, the normal of the
         face each point was sampled on (before noise; meaningless for outliers).
     """
-    _check_domain(domain)
+    _check_domain(domain, real=True)
     spec = condition if isinstance(condition, ScanCondition) else CONDITIONS[condition]
     if domain == "rooms":
         rng = np.random.default_rng([seed, _STREAM_SCAN])
@@ -258,14 +265,16 @@ def real_shapes() -> List[Tuple[str, Mesh]]:
 
     Raises ``FileNotFoundError`` naming the folder when the shared data is missing.
     """
+    return [(os.path.splitext(os.path.basename(rel))[0], real_shape(index))
+            for index, rel in enumerate(REAL_SHAPES)]
+
+
+def real_shape(index: int) -> Mesh:
+    """The ``index``-th mesh of ``REAL_SHAPES``, in the unit frame."""
     from engine.io import read_mesh
 
     root = os.path.join(shared_dir(), "data", "real")
     if not os.path.isdir(root):
         raise FileNotFoundError(f"real meshes not found in {root}; set UDF_SHARED_DIR")
-    shapes = []
-    for rel in REAL_SHAPES:
-        mesh = read_mesh(os.path.join(root, rel))
-        name = os.path.splitext(os.path.basename(rel))[0]
-        shapes.append((name, to_unit_frame(Mesh(mesh.vertices, mesh.faces))))
-    return shapes
+    mesh = read_mesh(os.path.join(root, REAL_SHAPES[index]))
+    return to_unit_frame(Mesh(mesh.vertices, mesh.faces))

@@ -191,6 +191,19 @@ def test_real_shapes_load_in_the_unit_frame():
         assert abs(extent.max() - 1.0) < 1e-9 and len(mesh.faces) > 0
 
 
+@pytest.mark.skipif(not os.path.isdir(os.path.join(dataset.shared_dir(), "data", "real")),
+                    reason="shared real data not present")
+def test_real_domain_is_the_real_meshes_sampled_like_objects():
+    assert held_out_seeds("real", 100) == list(range(len(dataset.REAL_SHAPES)))
+    gt = make_shape("real", 6)  # the owl's mesh
+    assert np.array_equal(gt.faces, dataset.real_shapes()[6][1].faces)
+    cloud = make_input(gt, "real", "clean", 6)
+    assert len(cloud.points) == CONDITIONS["clean"].count
+    assert np.abs(cloud.points).max() <= 0.5 + 1e-9
+    with pytest.raises(ValueError):
+        make_shape("reals", 0)
+
+
 def _square(size=1.0):
     """A square of two triangles in z = 0, facing +z."""
     v = np.array([[0, 0, 0], [size, 0, 0], [size, size, 0], [0, size, 0]], float)
