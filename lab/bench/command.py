@@ -165,10 +165,11 @@ def _earlier(args, name: str, domain: str, condition: str):
 
 
 def _report(args, domains, conditions) -> int:
-    """Print the table of the results in ``--out`` for the selected method, domains, conditions."""
+    """Print the table of the results in ``--out`` for the selected method, domains, conditions
+    (each on its first ``--count`` shapes)."""
     import os
 
-    from .harness import format_table, read_json
+    from .harness import first_shapes, format_table, read_json
     from .methods import ours_name
 
     name = ours_name(args.radius_mode, args.radius) if args.method == "ours" else args.method
@@ -177,7 +178,8 @@ def _report(args, domains, conditions) -> int:
         for domain in domains:
             path = os.path.join(args.out, f"{name}_{domain}_{condition}.json")
             if os.path.exists(path):
-                results.append(read_json(path))
+                result = read_json(path)  # its first --count shapes (all, if it has fewer)
+                results.append(first_shapes(result, args.count) or result)
             else:
                 missing.append(path)
     print(format_table(results))
