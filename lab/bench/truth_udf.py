@@ -25,20 +25,14 @@ def truth_distances(surface: Mesh, nodes: np.ndarray, spacing: float, seed: int 
     """Unsigned distances (float32, same units) from ``nodes`` (P, 3) to the mesh ``surface``."""
     from scipy.spatial import cKDTree
 
-    from engine.meshing.mesh_ops import edge_topology, face_normals
+    from engine.meshing.mesh_ops import edge_topology
+    from engine.sampling import face_areas_and_normals, sample_surface
 
     vertices = np.asarray(surface.vertices, np.float64)
     faces = np.asarray(surface.faces, np.int64).reshape(-1, 3)
-    normals, areas = face_normals(vertices, faces)
+    areas, normals = face_areas_and_normals(vertices, faces)
     count = int(np.ceil(areas.sum() / spacing ** 2 * SAMPLES_PER_VOXEL))
-    rng = np.random.default_rng(seed)
-    which = rng.choice(len(faces), size=count, p=areas / areas.sum())
-    u, v = rng.random(count), rng.random(count)
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    corner = vertices[faces[which]]
-    samples = corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) \
-        + v[:, None] * (corner[:, 2] - corner[:, 0])
+    samples, _, which = sample_surface(vertices, faces, count, np.random.default_rng(seed))
     gap = spacing / np.sqrt(SAMPLES_PER_VOXEL)  # the samples' mean spacing
     # the rims, more densely: a node past a rim is as far as its closest rim point
     topo = edge_topology(faces)
