@@ -4,9 +4,10 @@ import numpy as np
 
 from . import mesh_ops
 
-SPECK_AREA = 16.0  # voxels^2: a piece smaller than this (a 4 x 4 voxel patch) may be a speck
+SPECK_AREA = 20.0  # voxels^2: a piece smaller than this (a patch of about 4.5 x 4.5 voxels) may be a speck
 CRUMB_AREA = 1.0  # voxels^2: a piece smaller than one voxel's face is below what the grid resolves
-ON_SHEET = 1.5  # voxels: a small piece this close to a larger one lies on it
+ON_SHEET = 2.0  # voxels: a small piece this close to a larger one lies on it (a fragment of
+#                the other layer, left stalled up to 2 voxels off the kept sheet)
 ON_SHEET_SHARE = 0.5  # ... with this share of its area
 SMALL_NEIGHBOURS = 32
 

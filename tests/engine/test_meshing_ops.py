@@ -84,6 +84,7 @@ def test_specks_go_small_parts_stay():
 
     add(12, [0, 0, 0])  # the sheet: 121 voxels^2
     add(3, [4, 4, 0.6], flip=True)  # 4 voxels^2 lying 0.6 voxel over it, facing the other way
+    add(5, [2, 6, 1.8])  # 16 voxels^2 stalled 1.8 voxels over it: a fragment of the other layer
     add(3, [30, 0, 0])  # a small part on its own: 4 voxels^2
     add(4, [0, 30, 0])  # two small pieces, one on the other: the larger (9) stays
     add(2, [1, 31, 0.5])  # ... the smaller (1) goes
@@ -96,7 +97,7 @@ def test_specks_go_small_parts_stay():
         start += len(v)
     verts, faces = np.concatenate(verts), np.concatenate(faces)
     v, f, counts = clean_mesh(verts, faces, spacing=1.0)
-    assert counts["specks"] == 3
+    assert counts["specks"] == 4
     _, areas = mo.face_normals(v, f)
     count, labels = mo.vertex_components(len(v), f)
     assert sorted(np.round(np.bincount(labels, weights=areas), 6)) == [4, 9, 121]
