@@ -4,7 +4,7 @@ import numpy as np
 
 from . import mesh_ops
 
-SPECK_AREA = 20.0  # voxels^2: a piece smaller than this (a patch of about 4.5 x 4.5 voxels) may be a speck
+SPECK_AREA = 20.0  # voxels^2: a piece smaller than this (about 4.5 x 4.5 voxels) may be a speck
 CRUMB_AREA = 1.0  # voxels^2: a piece smaller than one voxel's face is below what the grid resolves
 ON_SHEET = 2.0  # voxels: a small piece this close to a larger one lies on it (a fragment of
 #                the other layer, left stalled up to 2 voxels off the kept sheet)
