@@ -154,9 +154,14 @@ def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
     return lo[first], hi[first], gap[first]
 
 
-def _parity_forest(m: int, a: np.ndarray, b: np.ndarray, weight: np.ndarray,
-                   opposite: np.ndarray):
+def _parity_forest(m: int, twin_f: np.ndarray, twin_g: np.ndarray, twin_weight: np.ndarray,
+                   pairs: np.ndarray, pair_weight: np.ndarray):
     """Minimum spanning forest of the signed graph and each node's parity along it.
+
+    ``twin_f``, ``twin_g``: pairs that get opposite labels (unique, ``f < g``), with weights in
+    [0, 1); ``pairs`` (P, 2): pairs that get the same label (unique), with weights of at least
+    1, so every twin constraint comes before every shared edge. Where a twin pair also shares
+    an edge, the twin constraint stands.
 
     Returns (parity (m,) bool, tree label (m,) int, tree count).
     """
@@ -164,24 +169,24 @@ def _parity_forest(m: int, a: np.ndarray, b: np.ndarray, weight: np.ndarray,
     from scipy.sparse.csgraph import breadth_first_order, connected_components
     from scipy.sparse.csgraph import minimum_spanning_tree
 
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    order = np.lexsort((weight, hi, lo))  # per pair, the lightest (firmest) constraint first
-    lo, hi, weight, opposite = lo[order], hi[order], weight[order], opposite[order]
-    first = np.ones(len(lo), bool)
-    first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
-    lo, hi, weight, opposite = lo[first], hi[first], weight[first], opposite[first]
-    # the sign travels in the weight's parity bit: opposite constraints get an odd integer rank
-    rank = np.empty(len(weight), np.int64)
-    rank[np.argsort(weight, kind="stable")] = np.arange(len(weight))
-    coded = 2 * rank + 2 + opposite.astype(np.int64)
-    graph = sparse.coo_matrix((coded.astype(np.float64), (lo, hi)), shape=(m, m)).tocsr()
+    lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    twin_keys = np.sort(twin_f.astype(np.int64) * m + twin_g)
+    keys = lo.astype(np.int64) * m + hi
+    at = np.minimum(np.searchsorted(twin_keys, keys), max(len(twin_keys) - 1, 0))
+    shared = twin_keys[at] == keys if len(twin_keys) else np.zeros(len(keys), bool)
+    lo, hi, pair_weight = lo[~shared], hi[~shared], pair_weight[~shared]
+    # the sign travels in the weight: opposite constraints weigh in [1, 1.1), the others about 2 or more
+    # (1 is added since the spanning tree reads a weight of 0 as no edge)
+    graph = sparse.coo_matrix((np.concatenate([1.0 + twin_weight, 1.0 + pair_weight]),
+                               (np.concatenate([twin_f, lo]), np.concatenate([twin_g, hi]))),
+                              shape=(m, m)).tocsr()
     forest = minimum_spanning_tree(graph).tocoo()
     count, labels = connected_components(forest, directed=False)
     # a virtual root joined to one face of every tree: one breadth-first search for all
     roots = np.unique(labels, return_index=True)[1]
     rows = np.concatenate([forest.row, np.full(len(roots), m)])
     cols = np.concatenate([forest.col, roots])
-    sign = np.concatenate([forest.data.astype(np.int64) % 2, np.zeros(len(roots), np.int64)])
+    sign = np.concatenate([(forest.data < 1.5).astype(np.int64), np.zeros(len(roots), np.int64)])
     tree = sparse.coo_matrix((sign + 1, (rows, cols)), shape=(m + 1, m + 1)).tocsr()
     tree = tree + tree.T
     order, pred = breadth_first_order(tree, m, directed=False, return_predecessors=True)
@@ -263,12 +268,9 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     check_cancel(cancel)
     pairs, _ = mesh_ops.dual_edges(faces)
     cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
-    a = np.concatenate([twin_f, pairs[:, 0]])
-    b = np.concatenate([twin_g, pairs[:, 1]])
     # twins first (closest first), then shared edges from flat (cos 1) to folded (cos -1)
-    weight = np.concatenate([0.1 * gap / (1.0 + gap), 2.0 - cos])
-    opposite = np.concatenate([np.ones(len(twin_f), bool), np.zeros(len(pairs), bool)])
-    parity, labels, count = _parity_forest(m, a, b, weight, opposite)
+    parity, labels, count = _parity_forest(m, twin_f, twin_g, 0.1 * gap / (1.0 + gap),
+                                           pairs, 2.0 - cos)
     check_cancel(cancel)
     area_odd = np.bincount(labels, weights=start_area * parity, minlength=count)
     area_even = np.bincount(labels, weights=start_area * ~parity, minlength=count)

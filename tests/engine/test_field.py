@@ -1,5 +1,7 @@
 """The UDF band: the right nodes, the right values, truncated safely, cancellable."""
 
+import os
+
 import numpy as np
 import pytest
 import torch  # a runtime requirement (requirements.txt): never skipped
@@ -129,6 +131,17 @@ def test_auto_picks_cuda_only_where_there_is_one_and_cuda_is_refused_clearly_els
         assert resolve_device("auto") == "cpu"
         with pytest.raises(InputError, match="cuda"):
             resolve_device("cuda")
+
+
+def test_auto_on_a_machine_without_an_nvidia_driver_does_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, engine.devices as d; d._no_nvidia_driver = lambda: True; "
+            "print(d.resolve_device('auto'), 'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
+    assert out.stdout.split() == ["cpu", "False"]
 
 
 def test_trimming_the_padding_leaves_the_backbone_output_unchanged(tmp_path):
