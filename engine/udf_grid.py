@@ -248,13 +248,18 @@ class UDFGrid:
         dist[~inside] = self.far_value
         return dist, vec
 
-    def closest_index(self, index: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    def closest_index(self, index: np.ndarray, cells: Optional["CellCache"] = None
+                      ) -> Tuple[np.ndarray, np.ndarray]:
         """Same as :meth:`closest` in grid index coordinates: lengths in voxels.
 
         Parameters
         ----------
         index : (P, 3) float64
             Grid index coordinates.
+        cells : CellCache, optional
+            The cells of an earlier query of as many points (the same points, moved): their
+            interpolation coefficients are reused for the points still in the same cell. The
+            result is the same as without it.
 
         Returns
         -------
@@ -263,16 +268,16 @@ class UDFGrid:
         if self.exact is not None:
             dist, vec = self.closest(self.index_to_world(index))
             return dist / self.spacing, vec / self.spacing
-        vec, inside = self._interpolate(np.asarray(index, dtype=np.float64))
+        vec, inside = self._interpolate(np.asarray(index, dtype=np.float64), cells)
         dist = np.sqrt(np.einsum("ij,ij->i", vec, vec))
         dist[~inside] = np.inf
         return dist, vec
 
-    def _interpolate(self, g: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    def _interpolate(self, g: np.ndarray, cells: Optional["CellCache"] = None
+                     ) -> Tuple[np.ndarray, np.ndarray]:
         """Trilinear V (voxel units, (P, 3) float64) at index coordinates, and an inside mask."""
         if self._bricks is None:
             self.prepare(4.0 * self.spacing + max(self.min_value, 0.0))
-        table, cells, nbricks = self._bricks
         # cell = floor(clip(g, 0, dims - 1)) capped at dims - 2, t = clip(g) - cell, computed as
         # clip(trunc(g)) and clip(g - cell, 0, 1) (the same numbers, fewer passes)
         cell = g.astype(np.int32)
@@ -281,15 +286,10 @@ class UDFGrid:
         t = g - cell
         np.clip(t, 0.0, 1.0, out=t)
         t = t.astype(np.float32)
-        brick = cell // BRICK
-        cell -= brick * BRICK  # local cell in its brick
-        brick = (brick[:, 0] * int(nbricks[1]) + brick[:, 1]) * int(nbricks[2]) + brick[:, 2]
-        slot = table[brick]
-        inside = slot >= 0
-        slot[~inside] = cells.shape[0] // _CELLS - 1  # last brick: zeros
-        row = slot.astype(np.intp) * _CELLS
-        row += (cell[:, 0] * BRICK + cell[:, 1]) * BRICK + cell[:, 2]
-        coef = np.take(cells, row, axis=0)  # (P, 3, 8): channel, polynomial term
+        if cells is None:
+            coef, inside = self._cell_coefficients(cell)
+        else:
+            coef, inside = cells.update(cell, self._cell_coefficients)
         tx, ty, tz = t.T
         terms = np.empty((len(g), 8), dtype=np.float32)
         terms[:, 0] = 1.0
@@ -301,3 +301,38 @@ class UDFGrid:
         np.multiply(tx, ty, out=terms[:, 6])
         np.multiply(terms[:, 6], tz, out=terms[:, 7])
         return np.einsum("nck,nk->nc", coef, terms).astype(np.float64), inside
+
+    def _cell_coefficients(self, cell: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """The trilinear coefficients (P, 3, 8) float32 of V in cells (P, 3) int32 (zeros outside
+        the prepared bricks) and the inside mask (P,) bool."""
+        table, coefficients, nbricks = self._bricks
+        brick = cell // BRICK
+        local = cell - brick * BRICK  # the cell in its brick
+        brick = (brick[:, 0] * int(nbricks[1]) + brick[:, 1]) * int(nbricks[2]) + brick[:, 2]
+        slot = table[brick]
+        inside = slot >= 0
+        slot[~inside] = coefficients.shape[0] // _CELLS - 1  # last brick: zeros
+        row = slot.astype(np.intp) * _CELLS
+        row += (local[:, 0] * BRICK + local[:, 1]) * BRICK + local[:, 2]
+        return np.take(coefficients, row, axis=0), inside
+
+
+class CellCache:
+    """The cells of the last query of a fixed set of moving points and their coefficients:
+    points that stay in their cell skip the brick lookup and the coefficient gather."""
+
+    def __init__(self):
+        self.cell = self.coef = self.inside = None
+
+    def update(self, cell: np.ndarray, coefficients) -> Tuple[np.ndarray, np.ndarray]:
+        """The coefficients and inside mask at ``cell`` (P, 3) int32; ``coefficients(cells)``
+        computes them for the cells that changed."""
+        if self.cell is None or len(self.cell) != len(cell):
+            self.cell = cell
+            self.coef, self.inside = coefficients(cell)
+            return self.coef, self.inside
+        moved = np.flatnonzero((cell != self.cell).any(axis=1))
+        if moved.size:
+            self.cell[moved] = cell[moved]
+            self.coef[moved], self.inside[moved] = coefficients(cell[moved])
+        return self.coef, self.inside

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..cpu_threads import cpu_threads
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
+from ..udf_grid import CellCache
 from . import mesh_ops
 
 STALL_CHECK = 10  # iterations between two convergence checks of the low-step phases
@@ -134,6 +135,9 @@ class _Cover:
         self.mom, self.vel = np.zeros_like(g), np.zeros(n)
         self.weight = np.ones((n, 1))
         self.area = np.empty(m)
+        # each range's centroids and vertices keep their cells from one iteration to the next
+        self.face_cells = [CellCache() for _ in self.frows]
+        self.vertex_cells = [CellCache() for _ in self.vrows]
         self.n0 = self.c0 = None  # stage 2's frozen normals and centroids
         self.capture = False  # the next face pass records c0
 
@@ -142,7 +146,7 @@ class _Cover:
         r = self.frows[k]
         cents = self.cents[r]
         cents[:] = self.cen[k] @ self.g
-        self.dc[r], vc = self.field.closest_index(cents)
+        self.dc[r], vc = self.field.closest_index(cents, self.face_cells[k])
         grad = _unit_inplace(vc, self.dc[r])
         if stage1:
             if areas:
@@ -161,7 +165,7 @@ class _Cover:
     def vertex_pass(self, k: int, stage1: bool) -> None:
         """Vertex distances and gradients; stage 1's weighted umbrella vectors."""
         r = self.vrows[k]
-        self.dv[r], vv = self.field.closest_index(self.g[r])
+        self.dv[r], vv = self.field.closest_index(self.g[r], self.vertex_cells[k])
         self.grad[r] = _unit_inplace(vv, self.dv[r])
         if stage1:
             wd = self.lap[k] @ self.g

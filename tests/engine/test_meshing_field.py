@@ -38,6 +38,26 @@ def test_sphere_interpolation_error_small():
     assert np.abs((p - v) - cp_true).max() < 0.05 * grid.spacing
 
 
+def test_moving_points_through_a_cell_cache_give_the_uncached_values_bit_for_bit():
+    from engine.udf_grid import CellCache
+
+    grid = A.sample_grid(A.sphere((0.1, -0.05, 0.02), 0.5), [-1] * 3, [1] * 3, 64, exact=False)
+    rng = np.random.default_rng(2)
+    g = grid.world_to_index(rng.uniform(-0.7, 0.7, (5000, 3)))
+    cells = CellCache()
+    moved = 0
+    for step in range(6):  # small steps (most points stay in their cell) and one large one
+        g = g + rng.normal(0, 0.05 if step != 3 else 3.0, g.shape)
+        before = None if cells.cell is None else cells.cell.copy()
+        d_cached, v_cached = grid.closest_index(g, cells)
+        d, v = grid.closest_index(g)
+        assert np.array_equal(d_cached, d) and np.array_equal(v_cached, v)
+        if before is not None:
+            moved += int((before != cells.cell).any(axis=1).sum())
+    assert 0 < moved < 6 * len(g)  # the cache was both reused and refreshed
+    assert np.isinf(d).any() and np.isfinite(d).any()  # points inside and outside the band
+
+
 def test_band_equals_dense_near_surface():
     dense = A.sample_grid(A.torus((0.02, 0, 0), 0.5, 0.2), [-1] * 3, [1] * 3, 64, exact=False)
     h = dense.spacing
