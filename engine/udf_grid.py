@@ -283,9 +283,8 @@ class UDFGrid:
         cell = g.astype(np.int32)
         np.minimum(cell, np.array(self.shape, np.int32) - 2, out=cell)
         np.maximum(cell, 0, out=cell)
-        t = g - cell
+        t = (g - cell).astype(np.float32)
         np.clip(t, 0.0, 1.0, out=t)
-        t = t.astype(np.float32)
         if cells is None:
             coef, inside = self._cell_coefficients(cell)
         else:
@@ -331,7 +330,8 @@ class CellCache:
             self.cell = cell
             self.coef, self.inside = coefficients(cell)
             return self.coef, self.inside
-        moved = np.flatnonzero((cell != self.cell).any(axis=1))
+        changed = cell != self.cell
+        moved = np.flatnonzero(changed[:, 0] | changed[:, 1] | changed[:, 2])
         if moved.size:
             self.cell[moved] = cell[moved]
             self.coef[moved], self.inside[moved] = coefficients(cell[moved])
