@@ -318,7 +318,11 @@ class UDFGrid:
 
 class CellCache:
     """The cells of the last query of a fixed set of moving points and their coefficients:
-    points that stay in their cell skip the brick lookup and the coefficient gather."""
+    points that stay in their cell skip the brick lookup and the coefficient gather.
+
+    A cache serves one grid with its bricks as prepared: preparing the grid again (another band)
+    needs a new cache.
+    """
 
     def __init__(self):
         self.cell = self.coef = self.inside = None
