@@ -288,7 +288,7 @@ class UDFGrid:
         if cells is None:
             coef, inside = self._cell_coefficients(cell)
         else:
-            coef, inside = cells.update(cell, self._cell_coefficients)
+            coef, inside = cells.update(cell, self._cell_coefficients, self._bricks)
         tx, ty, tz = t.T
         terms = np.empty((len(g), 8), dtype=np.float32)
         terms[:, 0] = 1.0
@@ -320,18 +320,19 @@ class CellCache:
     """The cells of the last query of a fixed set of moving points and their coefficients:
     points that stay in their cell skip the brick lookup and the coefficient gather.
 
-    A cache serves one grid with its bricks as prepared: preparing the grid again (another band)
-    needs a new cache.
+    Its entries hold for the bricks they were read from: a query on another grid, or on the same
+    grid prepared again, reads every point afresh.
     """
 
     def __init__(self):
-        self.cell = self.coef = self.inside = None
+        self.cell = self.coef = self.inside = self.bricks = None
 
-    def update(self, cell: np.ndarray, coefficients) -> Tuple[np.ndarray, np.ndarray]:
+    def update(self, cell: np.ndarray, coefficients, bricks
+               ) -> Tuple[np.ndarray, np.ndarray]:
         """The coefficients and inside mask at ``cell`` (P, 3) int32; ``coefficients(cells)``
-        computes them for the cells that changed."""
-        if self.cell is None or len(self.cell) != len(cell):
-            self.cell = cell
+        computes them for the cells that changed; ``bricks``: the grid's prepared bricks."""
+        if self.cell is None or len(self.cell) != len(cell) or self.bricks is not bricks:
+            self.cell, self.bricks = cell, bricks
             self.coef, self.inside = coefficients(cell)
             return self.coef, self.inside
         changed = cell != self.cell

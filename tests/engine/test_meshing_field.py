@@ -56,6 +56,10 @@ def test_moving_points_through_a_cell_cache_give_the_uncached_values_bit_for_bit
             moved += int((before != cells.cell).any(axis=1).sum())
     assert 0 < moved < 6 * len(g)  # the cache was both reused and refreshed
     assert np.isinf(d).any() and np.isfinite(d).any()  # points inside and outside the band
+    grid.prepare(8 * grid.spacing)  # a wider band: other bricks, the cache reads afresh
+    d_cached, v_cached = grid.closest_index(g, cells)
+    d, v = grid.closest_index(g)
+    assert np.array_equal(d_cached, d) and np.array_equal(v_cached, v)
 
 
 def test_band_equals_dense_near_surface():
