@@ -158,10 +158,10 @@ def _parity_forest(m: int, twin_f: np.ndarray, twin_g: np.ndarray, twin_weight: 
                    pairs: np.ndarray, pair_weight: np.ndarray):
     """Minimum spanning forest of the signed graph and each node's parity along it.
 
-    ``twin_f``, ``twin_g``: pairs that get opposite labels (unique, ``f < g``), with weights in
-    [0, 1); ``pairs`` (P, 2): pairs that get the same label (unique), with weights of at least
-    1, so every twin constraint comes before every shared edge. Where a twin pair also shares
-    an edge, the twin constraint stands.
+    ``twin_f``, ``twin_g``: pairs that get opposite labels (unique, ``f < g``), with weights
+    under 0.5; ``pairs`` (P, 2): pairs that get the same label (unique), with weights above 0.5,
+    so every twin constraint comes before every shared edge. Where a twin pair also shares an
+    edge, the twin constraint stands.
 
     Returns (parity (m,) bool, tree label (m,) int, tree count).
     """
@@ -170,12 +170,10 @@ def _parity_forest(m: int, twin_f: np.ndarray, twin_g: np.ndarray, twin_weight: 
     from scipy.sparse.csgraph import minimum_spanning_tree
 
     lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-    twin_keys = np.sort(twin_f.astype(np.int64) * m + twin_g)
-    keys = lo.astype(np.int64) * m + hi
-    at = np.minimum(np.searchsorted(twin_keys, keys), max(len(twin_keys) - 1, 0))
-    shared = twin_keys[at] == keys if len(twin_keys) else np.zeros(len(keys), bool)
-    lo, hi, pair_weight = lo[~shared], hi[~shared], pair_weight[~shared]
-    # the sign travels in the weight: opposite constraints weigh in [1, 1.1), the others about 2 or more
+    twin = np.isin(lo.astype(np.int64) * m + hi, twin_f.astype(np.int64) * m + twin_g,
+                   assume_unique=True)
+    lo, hi, pair_weight = lo[~twin], hi[~twin], pair_weight[~twin]
+    # the sign travels in the weight: opposite constraints weigh under 1.5, the others above
     # (1 is added since the spanning tree reads a weight of 0 as no edge)
     graph = sparse.coo_matrix((np.concatenate([1.0 + twin_weight, 1.0 + pair_weight]),
                                (np.concatenate([twin_f, lo]), np.concatenate([twin_g, hi]))),
