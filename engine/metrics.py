@@ -13,6 +13,9 @@ face normals, and nearest neighbours are found in both directions with a k-d tre
 * ``double_layer`` / ``gt_double_layer``: the double-layered share of the prediction's (ground
   truth's) area, see :func:`double_layer_share`. CD, F1 and NC cannot see a second sheet lying on
   the first; this can. The ground truth's own share comes from its thin parts.
+* ``double_layer_wide`` / ``gt_double_layer_wide``: the same within ``WIDE_LAYERS`` layer
+  distances (:func:`wide_double_layer_share`): two layers of one sheet that stalled a few grid
+  spacings apart instead of meeting, which the one-spacing measure cannot see.
 * ``area_ratio``: prediction area / ground-truth area (a double layer doubles it, holes and
   retracted rims shrink it).
 * ``gt_close_sheets``: the share of the ground truth's area with another of its sheets within
@@ -47,6 +50,9 @@ CLOSE_OFFSET = 0.25
 _LAYER_DENSITY = 4.0  # samples per layer_distance^2 of area
 _LAYER_MAX_SAMPLES = 3_000_000
 _LAYER_NEIGHBOURS = 16
+WIDE_LAYERS = 4  # the wide double-layer measure looks this many layer distances off each point
+_WIDE_NEIGHBOURS = 4
+_WIDE_DENSITY = 2.0  # samples per layer_distance^2: about 6 within a layer distance of a probe
 
 
 def f1_key(threshold: float) -> str:
@@ -149,20 +155,29 @@ def close_sheet_share(vertices: np.ndarray, faces: np.ndarray,
     return _sheet_shares(vertices, faces, distance, seed, max_samples)[1]
 
 
+def _layer_samples(vertices, faces, distance, seed, max_samples, density=_LAYER_DENSITY):
+    """Area-weighted samples (points, normals, count), ``density`` per ``distance^2``; count 0
+    for a mesh without area."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0 or not distance > 0:
+        return None, None, 0
+    areas, _ = face_areas_and_normals(vertices, faces)
+    total = float(areas.sum())
+    if not np.isfinite(total) or total <= 0:
+        return None, None, 0
+    count = int(min(max_samples, max(1000, density * total / distance ** 2)))
+    points, normals, _ = sample_surface(vertices, faces, count, np.random.default_rng([seed, 2]))
+    return points, normals, count
+
+
 def _sheet_shares(vertices, faces, distance, seed, max_samples):
     """(double-layered share, close-sheet share) of a mesh's area."""
     from scipy.spatial import cKDTree
 
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    if len(faces) == 0 or not distance > 0:
+    points, normals, count = _layer_samples(vertices, faces, distance, seed, max_samples)
+    if count == 0:
         return 0.0, 0.0
-    areas, _ = face_areas_and_normals(vertices, faces)
-    total = float(areas.sum())
-    if not np.isfinite(total) or total <= 0:
-        return 0.0, 0.0
-    count = int(min(max_samples, max(1000, _LAYER_DENSITY * total / distance ** 2)))
-    points, normals, _ = sample_surface(vertices, faces, count, np.random.default_rng([seed, 2]))
     tree = cKDTree(points)
     k = min(_LAYER_NEIGHBOURS, count)
     double = np.zeros(count, bool)
@@ -182,11 +197,49 @@ def _sheet_shares(vertices, faces, distance, seed, max_samples):
     return float(double.mean()), float(close.mean())
 
 
+def wide_double_layer_share(vertices: np.ndarray, faces: np.ndarray,
+                            distance: float = LAYER_DISTANCE, layers: int = WIDE_LAYERS,
+                            seed: int = 0, max_samples: int = _LAYER_MAX_SAMPLES) -> float:
+    """The share of a mesh's area with an opposite-facing sheet along its normal line within
+    ``layers * distance``, either side.
+
+    :func:`double_layer_share` looks ``distance`` (one grid spacing) around each point: two
+    layers of one sheet that stalled 2-4 spacings apart, on either side of the surface, pass it
+    unseen. Here each sample (2 per ``distance^2`` of area) probes its normal line at every multiple of
+    ``distance`` up to ``layers`` of them, both ways, and counts as double-layered when a sample
+    within ``distance`` of a probe faces the other way (``cos < -0.5``). The two sides of a part
+    thinner than ``layers * distance`` count too: the ground truth's share says how much.
+
+    Returns a float in [0, 1] (0 for a mesh without area).
+    """
+    from scipy.spatial import cKDTree
+
+    points, normals, count = _layer_samples(vertices, faces, distance, seed, max_samples,
+                                            _WIDE_DENSITY)
+    if count == 0:
+        return 0.0
+    tree = cKDTree(points)
+    k = min(_WIDE_NEIGHBOURS, count)
+    double = np.zeros(count, bool)
+    steps = distance * np.arange(1, layers + 1)
+    for start in range(0, count, 100_000):
+        stop = min(start + 100_000, count)
+        p, n = points[start:stop], normals[start:stop]
+        for step in np.concatenate([steps, -steps]):
+            _, idx = tree.query(p + step * n, k=k, distance_upper_bound=distance, workers=-1)
+            idx = idx.reshape(stop - start, k)
+            valid = idx < count
+            cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], n)
+            double[start:stop] |= (valid & (cos < OPPOSITE_COS)).any(axis=1)
+    return float(double.mean())
+
+
 def layer_scores(pred_vertices: np.ndarray, pred_faces: np.ndarray, gt_vertices: np.ndarray,
                  gt_faces: np.ndarray, distance: float = LAYER_DISTANCE,
                  seed: int = 0) -> Dict[str, float]:
-    """``double_layer``, ``gt_double_layer``, ``gt_close_sheets``, ``area_ratio`` and
-    ``area_ratio_thin_once`` of a prediction (same units; see the module docstring)."""
+    """``double_layer``, ``gt_double_layer``, ``double_layer_wide``, ``gt_double_layer_wide``,
+    ``gt_close_sheets``, ``area_ratio`` and ``area_ratio_thin_once`` of a prediction (same
+    units; see the module docstring)."""
     pred_area = _surface_area(Mesh(pred_vertices, pred_faces))
     gt_area = _surface_area(Mesh(gt_vertices, gt_faces))
     gt_double, gt_close = _sheet_shares(gt_vertices, gt_faces, distance, seed,
@@ -194,6 +247,10 @@ def layer_scores(pred_vertices: np.ndarray, pred_faces: np.ndarray, gt_vertices:
     thin_once = gt_area * (1.0 - gt_close / 2)
     return {"double_layer": double_layer_share(pred_vertices, pred_faces, distance, seed),
             "gt_double_layer": gt_double, "gt_close_sheets": gt_close,
+            "double_layer_wide": wide_double_layer_share(pred_vertices, pred_faces, distance,
+                                                         seed=seed),
+            "gt_double_layer_wide": wide_double_layer_share(gt_vertices, gt_faces, distance,
+                                                            seed=seed),
             "area_ratio": pred_area / gt_area if gt_area > 0 else float("nan"),
             "area_ratio_thin_once": pred_area / thin_once if thin_once > 0 else float("nan")}
 
@@ -219,7 +276,8 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
     -------
     dict
         ``cd_l1_x100``, ``cd_l2``, ``f1_0.005``, ``f1_0.01``, ``nc`` (floats, distances in the unit
-        frame), ``double_layer``, ``gt_double_layer``, ``gt_close_sheets``, ``area_ratio`` and
+        frame), ``double_layer``, ``gt_double_layer``, ``double_layer_wide``,
+        ``gt_double_layer_wide``, ``gt_close_sheets``, ``area_ratio`` and
         ``area_ratio_thin_once`` (:func:`layer_scores`),
         ``empty`` (bool, True when the prediction has no surface to sample; then the
         Chamfer distances are inf and F-scores and NC 0), ``samples`` (int, the count per mesh)
@@ -243,10 +301,14 @@ def evaluate(pred: Mesh, gt: Mesh, samples: int = 100_000, seed: int = 0,
         worst = {"cd_l1_x100": float("inf"), "cd_l2": float("inf")}
         worst.update({f1_key(t): 0.0 for t in DEFAULT_THRESHOLDS})
         worst["nc"] = 0.0
-        gt_double, gt_close = _sheet_shares(frame.to_unit(np.asarray(
-            gt.vertices, dtype=np.float64)), gt.faces, layer_distance, seed, _LAYER_MAX_SAMPLES)
+        gt_unit = frame.to_unit(np.asarray(gt.vertices, dtype=np.float64))
+        gt_double, gt_close = _sheet_shares(gt_unit, gt.faces, layer_distance, seed,
+                                            _LAYER_MAX_SAMPLES)
         worst.update({"double_layer": 0.0, "area_ratio": 0.0, "area_ratio_thin_once": 0.0,
-                      "gt_double_layer": gt_double, "gt_close_sheets": gt_close})
+                      "gt_double_layer": gt_double, "gt_close_sheets": gt_close,
+                      "double_layer_wide": 0.0,
+                      "gt_double_layer_wide": wide_double_layer_share(
+                          gt_unit, gt.faces, layer_distance, seed=seed)})
         return {**worst, **info, "empty": True}
 
     gt_vertices = frame.to_unit(np.asarray(gt.vertices, dtype=np.float64))

@@ -34,7 +34,9 @@ Twins are matched geometrically (the two layers' triangulations differ): an oppo
 face's normal line, on top of it or behind it (up to twice the iso-value: layers that did not
 fully meet). A pair that is not coincident is accepted only when the field has no bump between
 them: two distinct sheets a little apart (a thin part) have ``d > 0`` midway, the two layers of
-one sheet have the sheet between them.
+one sheet have the sheet between them. Past a voxel apart the pair must also show that its
+layers stalled: one stands off the surface, or the field dips between them (the low slab a
+sparse or noisy scan gives, whose two sides the layers stop at).
 """
 
 from dataclasses import dataclass
@@ -50,6 +52,8 @@ TWIN_LATERAL = 0.8  # voxels from the face's normal line
 COINCIDENT = 0.25  # voxels along the normal: closer pairs need no field test
 BUMP = 0.25  # a field bump of this share of the pair's distance (or 0.05 voxel) parts two sheets
 STANDOFF = 0.3  # ... and, past a voxel apart, one must stand off the surface by this share of it
+VALLEY = 0.05  # ... or the field must dip this far (voxels) below both between them
+VALLEY_SAMPLES = (0.2, 0.35, 0.5, 0.65, 0.8)  # where between them (the middle one: the bump)
 _NEIGHBOURS = 12
 
 
@@ -87,17 +91,22 @@ def _one_sheet_between(field, spacing, x_f, x_g):
     """True where two faces apart (voxel coordinates) are the two layers of one sheet.
 
     The surface lies between the two layers of one sheet: the field has no bump midway (two
-    sheets a little apart have ``d > 0`` there). Pairs more than a voxel apart must also stand
-    off the surface (at least one at a good part of the gap: layers that did not meet); two
-    converged faces that far apart are two sheets.
+    sheets a little apart have ``d > 0`` there). Pairs more than a voxel apart must also show
+    that they did not meet: one stands off the surface (at a good part of the gap), or the
+    field dips between them below both (``VALLEY``): on a sparse or noisy scan the field stays
+    low across a slab a voxel or more thick, its lowest values inside, and both layers stall
+    on its two sides. Two converged faces that far apart, with no valley between them, are two
+    sheets (a thin part).
     """
-    u_f, _ = field.closest(x_f * spacing)
-    u_g, _ = field.closest(x_g * spacing)
-    u_m, _ = field.closest(0.5 * (x_f + x_g) * spacing)
+    u_f = field.closest(x_f * spacing)[0] / spacing
+    u_g = field.closest(x_g * spacing)[0] / spacing
+    inner = np.array([field.closest(((1.0 - t) * x_f + t * x_g) * spacing)[0]
+                      for t in VALLEY_SAMPLES]) / spacing
     gap = np.linalg.norm(x_g - x_f, axis=1)
-    high = np.maximum(u_f, u_g) / spacing
-    bump = u_m / spacing - high
-    return (bump <= np.maximum(BUMP * gap, 0.05)) & ((gap <= 1.0) | (high >= STANDOFF * gap))
+    high = np.maximum(u_f, u_g)
+    bump = inner[len(VALLEY_SAMPLES) // 2] - high
+    apart = (high >= STANDOFF * gap) | (inner.min(axis=0) <= np.minimum(u_f, u_g) - VALLEY)
+    return (bump <= np.maximum(BUMP * gap, 0.05)) & ((gap <= 1.0) | apart)
 
 
 def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,

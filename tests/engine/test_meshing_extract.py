@@ -317,3 +317,38 @@ def test_faces_turned_against_a_sheet_are_dropped_a_thin_part_stays():
     assert double_layer_share(thin_v, thin_f, h) > 0.5
     kept, dropped = drop_facing_pairs(thin_v, thin_f, grid, h)
     assert dropped == 0
+
+
+@pytest.mark.parametrize("profile,twinned", [("valley", True), ("two_sheets", False),
+                                             ("blurred_sheets", False)])
+def test_layers_stalled_across_a_low_slab_are_twins_a_thin_part_is_not(profile, twinned):
+    """On a sparse or noisy scan the field stays low across a slab a voxel or more thick, lowest
+    inside, and the cover's two layers stall on its two sides, 2 to 3 voxels apart: they are the
+    two layers of one sheet, and one of them goes (before, such pairs were read as a thin part
+    and both stayed, a double wall). Two converged sheets as far apart, with the field rising
+    between them (a thin part) or reading zero all the way between them (a thin part on the
+    grid's nodes, which the closest-point field blurs into one zero slab), are two sheets, and
+    both stay."""
+    from engine.meshing.layers import choose_layer, find_twins
+
+    h = 0.01
+    half = 1.5 if profile == "two_sheets" else 1.0
+    low, low_f = sheet(21, h, -half * h, up=False)
+    high, high_f = sheet(21, h, half * h)
+    verts = np.concatenate([low, high])
+    faces = np.concatenate([low_f, high_f + len(low)])
+    axes = [np.arange(-10, 31) * h, np.arange(-10, 31) * h, np.arange(-6, 7) * h]
+    z = np.meshgrid(*axes, indexing="ij")[2]
+    udf = {"valley": 0.1 * h + 0.5 * np.abs(z),  # 0.3 voxel at the layers, 0 midway
+           "two_sheets": np.abs(np.abs(z) - half * h),  # 0 at the sheets, 1.5 voxels between
+           "blurred_sheets": np.abs(np.abs(z) - half * h)}[profile]
+    grid = UDFGrid(udf, [a[0] for a in axes], h)
+    cents = verts[faces].mean(axis=1) / h
+    normals, _ = mo.face_normals(verts, faces)
+    f, g, gap = find_twins(cents, normals, grid, h, 4.0)
+    assert len(f) == (len(low_f) if twinned else 0)
+    assert np.allclose(gap, 2 * half)
+    keep, _ = choose_layer(verts, verts, faces, h, grid, iso=2.0)
+    kept = faces[keep]
+    assert len(kept) == (len(low_f) if twinned else len(faces))
+    assert len(np.unique(verts[kept, 2])) == (1 if twinned else 2)  # one sheet, or both

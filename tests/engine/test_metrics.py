@@ -179,7 +179,8 @@ def test_cli_prints_one_json_object(tmp_path, capsys):
     result = json.loads(out)  # the whole of stdout is one JSON object
     assert set(result) == set(KEYS) | {"empty", "samples", "pred_faces", "double_layer",
                                         "gt_double_layer", "gt_close_sheets",
-                                        "area_ratio", "area_ratio_thin_once"}
+                                        "area_ratio", "area_ratio_thin_once",
+                                        "double_layer_wide", "gt_double_layer_wide"}
     assert result["cd_l1_x100"] == pytest.approx(2.0, rel=0.03)
     assert result["samples"] == 20000 and result["empty"] is False
 
@@ -218,6 +219,27 @@ def test_double_layer_share_sees_a_second_layer():
     single = evaluate(Mesh(v, f), Mesh(v, f), samples=20000, layer_distance=1 / 64)
     assert single["double_layer"] == 0.0 and single["area_ratio"] == pytest.approx(1.0)
     assert scores["cd_l1_x100"] < 1.2 * single["cd_l1_x100"]  # CD is blind to it
+
+
+def test_wide_double_layer_share_sees_layers_that_stalled_apart():
+    """Two opposite-facing layers of one sheet 1.5 to 4 spacings apart (stalled on either side
+    of a noisy scan's surface) pass the one-spacing measure unseen; the wide measure reads them
+    as all double. One layer, a sphere, and two layers farther apart than its reach read 0."""
+    from engine.metrics import double_layer_share, wide_double_layer_share
+
+    d = 1 / 128
+    v, f = _sphere()
+    assert wide_double_layer_share(v, f, d) == 0.0
+    for gap, wide in ((1.5, 1.0), (3.0, 1.0), (3.9, 1.0), (6.0, 0.0)):
+        outer = v * (1 + gap * d / 0.3)
+        both = (np.vstack([v, outer]), np.vstack([f, f[:, ::-1] + len(v)]))
+        assert double_layer_share(*both, d) < 0.01
+        assert wide_double_layer_share(*both, d) == pytest.approx(wide, abs=0.01)
+    scores = evaluate(Mesh(*both), Mesh(v, f), samples=20000, layer_distance=d)
+    assert scores["double_layer_wide"] == 0.0 and scores["gt_double_layer_wide"] == 0.0
+    near = (np.vstack([v, v * (1 + 2 * d / 0.3)]), np.vstack([f, f[:, ::-1] + len(v)]))
+    scores = evaluate(Mesh(*near), Mesh(v, f), samples=20000, layer_distance=d)
+    assert scores["double_layer"] < 0.01 and scores["double_layer_wide"] > 0.99
 
 
 def test_area_ratio_thin_once_reads_one_for_a_thin_part_made_one_sheet():
