@@ -164,8 +164,8 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
     start = time.perf_counter()
     progress(0.9, "choosing one layer")
     if settings.cut:
-        keep, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel,
-                                   settings.other_side)
+        keep, verts, layer = choose_layer(cover_start, verts, faces, h, field, iso / h, cancel,
+                                          settings.other_side)
         kept, lips = peel_lips(verts, faces[keep])
         kept, flaps = drop_flaps(kept)
         kept, facing = drop_facing_pairs(verts, kept, field, h)
@@ -173,7 +173,8 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
         verts, kept, seams = extend_rims(verts, kept, field, h)
         kept, reclosed = close_pinholes(kept)  # where a face turned over by a rim step went
         stats.update({"twinned_faces": layer.twins, "layer_trees": layer.trees,
-                      "double_pairs": layer.double_pairs, "seam_vertices": len(seams),
+                      "double_pairs": layer.double_pairs, "centred_vertices": layer.centred,
+                      "seam_vertices": len(seams),
                       "lip_faces_dropped": lips, "flaps_dropped": flaps,
                       "facing_faces_dropped": facing,
                       "pinholes_closed": closed + reclosed})

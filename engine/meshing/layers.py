@@ -62,12 +62,14 @@ class LayerReport:
     """What the layer choice did.
 
     twins: faces with a twin; trees: independent choices (pieces of the constraint forest);
-    double_pairs: twin pairs that still keep both faces.
+    double_pairs: twin pairs that still keep both faces; centred: vertices moved towards the
+    middle of a slab their layers stalled across (:func:`_centre_stalled`).
     """
 
     twins: int
     trees: int
     double_pairs: int
+    centred: int = 0
 
 
 def _candidates(tree, cents, normals, query, probe, k):
@@ -245,6 +247,53 @@ def _drop_kept_twins(keep: np.ndarray, twin_f: np.ndarray, twin_g: np.ndarray,
     keep[np.where(attached[f] < attached[g], f, g)] = False
 
 
+STALLED_GAP = 1.0  # voxels: kept faces whose dropped twin lies farther move halfway to it
+CENTRE_SMOOTH = 4  # rounds of averaging those moves over the kept faces' vertices
+
+
+def _centre_stalled(x: np.ndarray, faces: np.ndarray, keep: np.ndarray, twin_f: np.ndarray,
+                    twin_g: np.ndarray, gap: np.ndarray) -> Tuple[np.ndarray, int]:
+    """Move the kept layer halfway to the dropped one where the two stalled apart.
+
+    Two layers that stopped more than ``STALLED_GAP`` voxels apart on either side of a low slab
+    (a sparse or noisy scan) have the surface between them: the points lie across the slab,
+    the field is lowest inside it. Each kept face of such a pair moves along its normal by half
+    the depth of its dropped twin; a vertex takes the mean of its kept faces' moves (0 for a face
+    with no such twin), averaged ``CENTRE_SMOOTH`` times with its neighbours', so the moved
+    region fades into the rest instead of stepping. Voxel units; returns (the moves, the count
+    of vertices moved).
+    """
+    from scipy import sparse
+
+    far = gap > STALLED_GAP
+    f, g = twin_f[far], twin_g[far]
+    one = keep[f] != keep[g]
+    kept, dropped = np.where(keep[f], f, g)[one], np.where(keep[f], g, f)[one]
+    if len(kept) == 0:
+        return None, 0
+    normals, _ = mesh_ops.face_normals(x, faces)
+    cents = x[faces].mean(axis=1)
+    depth = np.einsum("ij,ij->i", cents[dropped] - cents[kept], normals[kept])
+    m, n = len(faces), len(x)
+    pairs = np.bincount(kept, minlength=m).astype(np.float64)
+    face_move = _sum_rows(kept, 0.5 * depth[:, None] * normals[kept], m)
+    face_move[pairs > 0] /= pairs[pairs > 0, None]
+    corners = faces[keep].reshape(-1)
+    share = np.bincount(corners, minlength=n).astype(np.float64)
+    move = _sum_rows(corners, np.repeat(face_move[keep], 3, axis=0), n)
+    move[share > 0] /= share[share > 0, None]
+    edges = faces[keep][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    ring = sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                        np.r_[edges[:, 1], edges[:, 0]])),
+                             shape=(n, n)).tocsr()
+    ring.data[:] = 1.0  # an edge shared by two faces counts once
+    ring = ring + sparse.identity(n, format="csr")
+    degree = np.asarray(ring.sum(axis=1)).ravel()
+    for _ in range(CENTRE_SMOOTH):
+        move = (ring @ move) / degree[:, None]
+    return move, int((np.abs(move).max(axis=1) > 1e-9).sum())
+
+
 def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spacing: float,
                  field=None, iso: float = 1.0, cancel: Optional[CancelFn] = None,
                  other_side: bool = False):
@@ -262,11 +311,12 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
 
     Returns
     -------
-    keep : (m,) bool; report : LayerReport.
+    keep : (m,) bool; vertices : (n, 3) float64, world units: the kept layer moved halfway to
+    the dropped one where the two stalled apart (:func:`_centre_stalled`); report : LayerReport.
     """
     m = len(faces)
     if m == 0:
-        return np.zeros(0, bool), LayerReport(0, 0, 0)
+        return np.zeros(0, bool), vertices, LayerReport(0, 0, 0)
     x = vertices / spacing
     normals, _ = mesh_ops.face_normals(x, faces)
     _, start_area = mesh_ops.face_normals(start / spacing, faces)
@@ -287,7 +337,11 @@ def choose_layer(start: np.ndarray, vertices: np.ndarray, faces: np.ndarray, spa
     twinned[twin_f] = twinned[twin_g] = True
     keep[_broad(~twinned, pairs, m)] = True  # the only cover of its part (a thin part's side)
     double = keep[twin_f] & keep[twin_g]
-    return keep, LayerReport(int(twinned.sum()), int(count), int(double.sum()))
+    move, centred = _centre_stalled(x, faces, keep, twin_f, twin_g, gap)
+    if centred:
+        vertices = vertices + move * spacing
+    return keep, vertices, LayerReport(int(twinned.sum()), int(count), int(double.sum()),
+                                          centred)
 
 
 FACING_COS = -0.5  # kept faces this far turned against each other read as a double layer

@@ -324,8 +324,8 @@ def test_faces_turned_against_a_sheet_are_dropped_a_thin_part_stays():
 def test_layers_stalled_across_a_low_slab_are_twins_a_thin_part_is_not(profile, twinned):
     """On a sparse or noisy scan the field stays low across a slab a voxel or more thick, lowest
     inside, and the cover's two layers stall on its two sides, 2 to 3 voxels apart: they are the
-    two layers of one sheet, and one of them goes (before, such pairs were read as a thin part
-    and both stayed, a double wall). Two converged sheets as far apart, with the field rising
+    two layers of one sheet: one of them goes, and the other moves to the middle of the slab
+    (before, such pairs were read as a thin part and both stayed, a double wall). Two converged sheets as far apart, with the field rising
     between them (a thin part) or reading zero all the way between them (a thin part on the
     grid's nodes, which the closest-point field blurs into one zero slab), are two sheets, and
     both stay."""
@@ -348,7 +348,11 @@ def test_layers_stalled_across_a_low_slab_are_twins_a_thin_part_is_not(profile, 
     f, g, gap = find_twins(cents, normals, grid, h, 4.0)
     assert len(f) == (len(low_f) if twinned else 0)
     assert np.allclose(gap, 2 * half)
-    keep, _ = choose_layer(verts, verts, faces, h, grid, iso=2.0)
+    keep, moved, _ = choose_layer(verts, verts, faces, h, grid, iso=2.0)
     kept = faces[keep]
     assert len(kept) == (len(low_f) if twinned else len(faces))
-    assert len(np.unique(verts[kept, 2])) == (1 if twinned else 2)  # one sheet, or both
+    z = moved[np.unique(kept), 2] / h
+    if twinned:  # one sheet, moved to the middle of the slab where the surface lies
+        assert np.abs(z).max() < 1e-9
+    else:  # both sheets, where they were
+        assert np.array_equal(moved, verts)
