@@ -53,6 +53,7 @@ _LAYER_NEIGHBOURS = 16
 WIDE_LAYERS = 4  # the wide double-layer measure looks this many layer distances off each point
 _WIDE_NEIGHBOURS = 4
 _WIDE_DENSITY = 2.0  # samples per layer_distance^2: about 6 within a layer distance of a probe
+_WIDE_PROBES = 100_000  # samples that probe (the share's standard error stays under 0.2 %)
 
 
 def f1_key(threshold: float) -> str:
@@ -205,10 +206,11 @@ def wide_double_layer_share(vertices: np.ndarray, faces: np.ndarray,
 
     :func:`double_layer_share` looks ``distance`` (one grid spacing) around each point: two
     layers of one sheet that stalled 2-4 spacings apart, on either side of the surface, pass it
-    unseen. Here each sample (2 per ``distance^2`` of area) probes its normal line at every multiple of
-    ``distance`` up to ``layers`` of them, both ways, and counts as double-layered when a sample
-    within ``distance`` of a probe faces the other way (``cos < -0.5``). The two sides of a part
-    thinner than ``layers * distance`` count too: the ground truth's share says how much.
+    unseen. Here the mesh is sampled by area (2 per ``distance^2``), and up to 100 000 of the
+    samples probe their normal lines at every multiple of ``distance`` up to ``layers`` of them,
+    both ways; a sample counts as double-layered when a sample within ``distance`` of one of its
+    probes faces the other way (``cos < -0.5``). The two sides of a part thinner than
+    ``layers * distance`` count too: the ground truth's share says how much.
 
     Returns a float in [0, 1] (0 for a mesh without area).
     """
@@ -220,17 +222,16 @@ def wide_double_layer_share(vertices: np.ndarray, faces: np.ndarray,
         return 0.0
     tree = cKDTree(points)
     k = min(_WIDE_NEIGHBOURS, count)
-    double = np.zeros(count, bool)
+    probes = min(count, _WIDE_PROBES)  # the samples are drawn independently: a prefix will do
+    p, n = points[:probes], normals[:probes]
+    double = np.zeros(probes, bool)
     steps = distance * np.arange(1, layers + 1)
-    for start in range(0, count, 100_000):
-        stop = min(start + 100_000, count)
-        p, n = points[start:stop], normals[start:stop]
-        for step in np.concatenate([steps, -steps]):
-            _, idx = tree.query(p + step * n, k=k, distance_upper_bound=distance, workers=-1)
-            idx = idx.reshape(stop - start, k)
-            valid = idx < count
-            cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], n)
-            double[start:stop] |= (valid & (cos < OPPOSITE_COS)).any(axis=1)
+    for step in np.concatenate([steps, -steps]):
+        _, idx = tree.query(p + step * n, k=k, distance_upper_bound=distance, workers=-1)
+        idx = idx.reshape(probes, k)
+        valid = idx < count
+        cos = np.einsum("qkc,qc->qk", normals[np.where(valid, idx, 0)], n)
+        double |= (valid & (cos < OPPOSITE_COS)).any(axis=1)
     return float(double.mean())
 
 
