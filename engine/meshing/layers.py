@@ -53,7 +53,7 @@ COINCIDENT = 0.25  # voxels along the normal: closer pairs need no field test
 BUMP = 0.25  # a field bump of this share of the pair's distance (or 0.05 voxel) parts two sheets
 STANDOFF = 0.3  # ... and, past a voxel apart, one must stand off the surface by this share of it
 VALLEY = 0.05  # ... or the field must dip this far (voxels) below both between them
-VALLEY_SAMPLES = (0.2, 0.35, 0.5, 0.65, 0.8)  # where between them (the middle one: the bump)
+VALLEY_SAMPLES = (0.2, 0.35, 0.65, 0.8)  # where between them, besides the middle, it looks
 _NEIGHBOURS = 12
 
 
@@ -102,13 +102,20 @@ def _one_sheet_between(field, spacing, x_f, x_g):
     """
     u_f = field.closest(x_f * spacing)[0] / spacing
     u_g = field.closest(x_g * spacing)[0] / spacing
-    inner = np.array([field.closest(((1.0 - t) * x_f + t * x_g) * spacing)[0]
-                      for t in VALLEY_SAMPLES]) / spacing
+    u_m = field.closest(0.5 * (x_f + x_g) * spacing)[0] / spacing
     gap = np.linalg.norm(x_g - x_f, axis=1)
     high = np.maximum(u_f, u_g)
-    bump = inner[len(VALLEY_SAMPLES) // 2] - high
-    apart = (high >= STANDOFF * gap) | (inner.min(axis=0) <= np.minimum(u_f, u_g) - VALLEY)
-    return (bump <= np.maximum(BUMP * gap, 0.05)) & ((gap <= 1.0) | apart)
+    no_bump = u_m - high <= np.maximum(BUMP * gap, 0.05)
+    one = no_bump & ((gap <= 1.0) | (high >= STANDOFF * gap))
+    ask = np.nonzero(no_bump & ~one)[0]
+    if len(ask):  # apart, converged: a valley between them, or two sheets?
+        low = np.minimum(u_f[ask], u_g[ask])
+        dip = u_m[ask] <= low - VALLEY
+        for t in VALLEY_SAMPLES:
+            inner = (1.0 - t) * x_f[ask] + t * x_g[ask]
+            dip |= field.closest(inner * spacing)[0] / spacing <= low - VALLEY
+        one[ask] = dip
+    return one
 
 
 def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
