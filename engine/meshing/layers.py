@@ -24,6 +24,9 @@ sheet turned faces over and measured as more double area than it closed). Rims, 
 beyond which the field rises, are moved out to where the field puts the surface's rim, the
 crowded rows of faces behind them stretched out in order (:func:`extend_rims`).
 
+Where the two layers of one sheet stalled more than a voxel apart, the kept one moves halfway to
+the dropped one, where the surface lies (:func:`_centre_stalled`).
+
 Kept faces that still face each other within a voxel, turned less than twins (both layers
 stalled a little off the surface and tilted, faces turned at a junction, two sheets crossing),
 lose one face of each pair where the field shows one sheet between them
