@@ -273,8 +273,6 @@ def _centre_stalled(x: np.ndarray, faces: np.ndarray, keep: np.ndarray, twin_f: 
     region fades into the rest instead of stepping. Voxel units; returns (the moves, the count
     of vertices moved).
     """
-    from scipy import sparse
-
     far = gap > STALLED_GAP
     f, g = twin_f[far], twin_g[far]
     one = keep[f] != keep[g]
@@ -288,19 +286,15 @@ def _centre_stalled(x: np.ndarray, faces: np.ndarray, keep: np.ndarray, twin_f: 
     pairs = np.bincount(kept, minlength=m).astype(np.float64)
     face_move = _sum_rows(kept, 0.5 * depth[:, None] * normals[kept], m)
     face_move[pairs > 0] /= pairs[pairs > 0, None]
-    corners = faces[keep].reshape(-1)
-    share = np.bincount(corners, minlength=n).astype(np.float64)
-    move = _sum_rows(corners, np.repeat(face_move[keep], 3, axis=0), n)
+    corners = mesh_ops.incidence_matrix(n, faces[keep])
+    share = np.asarray(corners.sum(axis=1)).ravel()
+    move = corners @ face_move[keep]
     move[share > 0] /= share[share > 0, None]
-    edges = faces[keep][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    ring = sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                        np.r_[edges[:, 1], edges[:, 0]])),
-                             shape=(n, n)).tocsr()
-    ring.data[:] = 1.0  # an edge shared by two faces counts once
-    ring = ring + sparse.identity(n, format="csr")
-    degree = np.asarray(ring.sum(axis=1)).ravel()
-    for _ in range(CENTRE_SMOOTH):
-        move = (ring @ move) / degree[:, None]
+    edges = mesh_ops.edge_topology(faces[keep]).edges
+    neighbours = np.bincount(edges.reshape(-1), minlength=n).astype(np.float64)[:, None]
+    mean_of_neighbours = mesh_ops.uniform_laplacian(n, edges)
+    for _ in range(CENTRE_SMOOTH):  # each vertex and its neighbours, equally weighted
+        move = (move + neighbours * (mean_of_neighbours @ move)) / (neighbours + 1.0)
     return move, int((np.abs(move).max(axis=1) > 1e-9).sum())
 
 
