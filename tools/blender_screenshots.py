@@ -2,6 +2,14 @@
 
     xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup \\
         --python tools/blender_screenshots.py -- CLOUD_FILE docs/ [RESOLUTION]
+        [--detail auto|resolution] [--tile-cells N] [--z-up] [--keep-units] [--prefix blender_]
+        [--timeout 900]
+
+``--detail auto`` keeps the panel's default detail (finer cells for a dense cloud) instead of
+exactly RESOLUTION cells; ``--tile-cells`` sets Tile Size (forces tiles); ``--z-up`` for a cloud
+stored z-up (the default turns a y-up file upright); ``--keep-units`` keeps the cloud's size
+(the default scales it to 2 units); ``--prefix`` names the shots
+``PREFIX{panel_idle,panel_running,result}.png``.
 
 It drives the real modal path: the Reconstruct operator is invoked as the button does
 (``INVOKE_DEFAULT`` in the 3D view), a timer waits for progress and then for the result, ``import
@@ -19,6 +27,7 @@ What makes the shots read well (each was a problem once):
 - for the result the cloud is hidden and the mesh is shown in Solid mode with a studio light.
 """
 
+import argparse
 import importlib
 import subprocess
 import sys
@@ -36,10 +45,20 @@ from blender_window import finish, screenshot, sidebar, view3d  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "bl_ext.udfr_shots.udf_reconstruction"
-ARGS = sys.argv[sys.argv.index("--") + 1:]
-cloud_path, out_dir = ARGS[:2]
-RESOLUTION = int(ARGS[2]) if len(ARGS) > 2 else 96
-OUT = Path(out_dir)
+PARSER = argparse.ArgumentParser(prog="blender_screenshots.py")
+PARSER.add_argument("cloud")
+PARSER.add_argument("out_dir")
+PARSER.add_argument("resolution", nargs="?", type=int, default=96)
+PARSER.add_argument("--detail", choices=("auto", "resolution"), default="resolution")
+PARSER.add_argument("--tile-cells", type=int, default=0)
+PARSER.add_argument("--z-up", action="store_true")
+PARSER.add_argument("--keep-units", action="store_true")
+PARSER.add_argument("--prefix", default="blender_")
+PARSER.add_argument("--timeout", type=float, default=900.0)
+ARGS = PARSER.parse_args(sys.argv[sys.argv.index("--") + 1:])
+cloud_path = ARGS.cloud
+RESOLUTION = ARGS.resolution
+OUT = Path(ARGS.out_dir)
 NAME = "Cloud"
 state = {"phase": "setup", "started": time.time()}
 
@@ -79,16 +98,22 @@ def setup():
         bpy.data.objects.remove(obj)
     cloud = io.read_point_cloud(cloud_path)
     points = cloud.points - cloud.points.mean(axis=0)
-    points *= 2.0 / np.ptp(points, axis=0).max()
+    if not ARGS.keep_units:
+        points *= 2.0 / np.ptp(points, axis=0).max()
     empty = np.zeros((0, 3), dtype=np.int64)
     context = bpy.context
     source = bridge.new_mesh_object(context, geometry.Mesh(points, empty), NAME, np.eye(4))
-    source.rotation_euler = (np.pi / 2, 0.0, 0.0)  # the file is y-up
-    source.location = (0.0, 0.0, 1.0)
+    if not ARGS.z_up:
+        source.rotation_euler = (np.pi / 2, 0.0, 0.0)  # the file is y-up
+    source.location = (0.0, 0.0, 0.5 * np.ptp(points[:, 2]) if ARGS.z_up else 1.0)
     context.view_layer.objects.active = source
     source.select_set(True)  # selected loose vertices are drawn orange; unselected, black
 
-    context.scene.udf_reconstruction.resolution = RESOLUTION
+    props = context.scene.udf_reconstruction
+    props.resolution = RESOLUTION
+    props.detail = ARGS.detail
+    if ARGS.tile_cells:
+        props.tile_cells = ARGS.tile_cells
     window, area, region = view3d()
     with context.temp_override(window=window, area=area, region=region):
         bpy.ops.screen.screen_full_area()  # Ctrl+Space: the 3D view fills the window
@@ -106,7 +131,8 @@ def setup():
         view.view_rotation = Euler((np.radians(72), 0.0, np.radians(35))).to_quaternion()
         bpy.ops.view3d.view_selected()
         bpy.ops.ed.undo_push(message="Add cloud")
-    log(f"cloud ready: {len(points)} points, resolution {RESOLUTION}")
+    log(f"cloud ready: {len(points):,} points, detail {ARGS.detail}, resolution {RESOLUTION}, "
+        f"tile cells {props.tile_cells}")
 
 
 def open_tab():
@@ -119,7 +145,7 @@ def open_tab():
 
 def tick():
     phase = state["phase"]
-    if time.time() - state["started"] > 900:
+    if time.time() - state["started"] > ARGS.timeout:
         log("timed out")
         finish(1)
     if phase == "setup":
@@ -137,7 +163,7 @@ def tick():
         state["phase"] = "idle"
         return 2.0
     if phase == "idle":
-        shot("blender_panel_idle.png")
+        shot(f"{ARGS.prefix}panel_idle.png")
         window, area, region = view3d()
         with bpy.context.temp_override(window=window, area=area, region=region):
             # undo=True: like a click on the button, the finished operator pushes an undo step
@@ -151,7 +177,7 @@ def tick():
     if phase == "running":
         if job is not None and job.fraction >= 0.3:
             time.sleep(0.3)  # let the 0.1 s timer redraw the panel with this progress
-            shot("blender_panel_running.png")
+            shot(f"{ARGS.prefix}panel_running.png")
             log(f"running shot at {job.fraction:.0%}: {job.message}")
             state["phase"] = "wait"
         elif job is None:
@@ -170,7 +196,7 @@ def tick():
         state["phase"] = "result"
         return 1.5
     if phase == "result":
-        shot("blender_result.png")
+        shot(f"{ARGS.prefix}result.png")
         bpy.data.objects[NAME].hide_set(False)
         window, area, region = view3d()
         with bpy.context.temp_override(window=window, area=area, region=region):

@@ -178,6 +178,29 @@ def test_two_close_sheets_stay_separate():
     assert 0.9 < area(mesh) / (2 * 0.36) < 1.02
 
 
+@pytest.mark.parametrize("gap", [1.0, 1.5, 3.0, 4.0])
+def test_sheets_closer_than_the_grid_resolves_come_out_once(gap):
+    """Two parallel sheets ``gap`` voxels apart, off the nodes. From 3 voxels apart each comes
+    out on its own plane. Closer than 2, the closest-point field the mesher reads (central
+    differences of d^2, interpolated) has one zero between them, not two: one sheet comes out
+    midway, once (no double layer), with one sheet's area. Between 2 and 3 voxels apart the
+    two are resolved in part (docs/meshing.md)."""
+    off = 0.013  # 0.8 voxel off the node planes
+    half = 0.5 * gap * H
+    shape = A.union(A.rectangle((0, 0, off - half), half_u=0.3, half_v=0.3),
+                    A.rectangle((0, 0, off + half), half_u=0.3, half_v=0.3))
+    grid = A.sample_grid(shape, [-0.5] * 3, [0.5] * 3, RES, exact=False)
+    mesh = extract_surface(grid).mesh
+    height = (mesh.vertices[mesh.faces].mean(axis=1)[:, 2] - off) / H
+    assert double_share(mesh) < 0.01
+    if gap >= 3.0:
+        assert abs(area(mesh) / (2 * 0.36) - 1) < 0.02
+        assert np.all(np.abs(np.abs(height) - 0.5 * gap) < 0.3)
+    else:
+        assert abs(area(mesh) / 0.36 - 1) < 0.03
+        assert np.all(np.abs(height) < 0.25)
+
+
 def test_small_disk_is_kept():
     _, result = run("two_disks")
     mesh = result.mesh
