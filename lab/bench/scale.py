@@ -6,6 +6,7 @@ Examples::
 
     python -m lab scale --rooms 4 --points 1000000 --voxel-size 0.01 --out bench_results/scale
     python -m lab scale --report --out bench_results/scale      # the table of the JSON files
+    python -m lab scale --rooms 4 --points 1000000 --write-cloud floor.ply   # the scan alone
 
 Writes ``floor_<rooms>r_<points>p_<voxel>cm.json`` to ``--out`` and prints, for ours
 (``--detail voxel_size``) and for Poisson: wall seconds, peak resident memory of the main
@@ -45,6 +46,20 @@ def build(rooms: int, points: int, seed: int, folder: Path):
     np.save(folder / "cloud.npy", cloud)
     np.save(folder / "again.npy", again)
     np.savez(folder / "truth.npz", vertices=truth.vertices, faces=truth.faces)
+
+
+def write_cloud(rooms: int, points: int, seed: int, path: str) -> None:
+    """The scan that :func:`build` makes, as a point cloud file (metres, z up)."""
+    from engine.geometry import Mesh
+    from engine.io import check_output_path, write_mesh
+
+    from .floor import make_floor, scan_floor
+
+    check_output_path(path)
+    _, parts = make_floor(rooms, seed)
+    cloud, _ = scan_floor(parts, points, seed)
+    write_mesh(path, Mesh(cloud, np.zeros((0, 3), np.int64)))
+    print(f"wrote {path}: {len(cloud):,} points of a floor of {rooms} rooms", file=sys.stderr)
 
 
 def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int) -> dict:
@@ -137,6 +152,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", default="bench_results/scale", help="folder for the JSON")
     parser.add_argument("--report", action="store_true",
                         help="print the table of the JSON files in --out; run nothing")
+    parser.add_argument("--write-cloud", metavar="PLY",
+                        help="write the floor's scan (--rooms, --points, --seed) as a point "
+                             "cloud file for Blender or the CLI, and run nothing else")
     parser.add_argument("--child", choices=("ours", "poisson"), help=argparse.SUPPRESS)
 
 
@@ -147,6 +165,9 @@ def run(args) -> int:
     out = Path(args.out)
     if args.report:
         print(report(sorted(out.glob("floor_*.json"))), end="")
+        return 0
+    if args.write_cloud:
+        write_cloud(args.rooms, args.points, args.seed, args.write_cloud)
         return 0
     folder = Path(args.work)
     folder.mkdir(parents=True, exist_ok=True)
