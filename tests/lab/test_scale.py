@@ -22,3 +22,19 @@ def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys):
     assert main(["scale", "--report", "--out", str(out)]) == 0
     table = capsys.readouterr().out
     assert "| 1 rooms, 20,000 points | ours (voxel 4 cm) |" in table
+
+
+def test_write_cloud_writes_the_scan_the_benchmark_reconstructs(tmp_path):
+    import numpy as np
+
+    from engine.io import read_point_cloud
+    from lab.bench.floor import make_floor, scan_floor
+
+    path = tmp_path / "floor.ply"
+    assert main(["scale", "--rooms", "1", "--points", "3000", "--seed", "2",
+                 "--write-cloud", str(path)]) == 0
+    points = read_point_cloud(str(path)).points
+    _, parts = make_floor(1, 2)
+    expected, _ = scan_floor(parts, 3000, 2)
+    assert points.shape == expected.shape
+    assert np.abs(points - expected).max() < 1e-6  # metres: the file keeps the scan
