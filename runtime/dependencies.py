@@ -11,6 +11,8 @@ every redraw and a broken package cannot break the panel.
 
 import importlib.metadata
 import importlib.util
+import os
+import subprocess
 import sys
 import threading
 
@@ -82,17 +84,42 @@ _gpu = {"known": False, "available": False, "name": "", "thread": None}
 _gpu_lock = threading.Lock()
 
 
-def _probe_gpu() -> None:
-    """Ask torch (importing it, which takes seconds) whether it sees a CUDA GPU."""
-    available, name = False, ""
-    try:
-        import torch
+_PROBE = ("import torch\n"
+          "if torch.cuda.is_available():\n"
+          "    print('cuda', torch.cuda.get_device_name(0))\n")
 
+
+def _ask_torch() -> tuple:
+    """``(available, device name)`` from torch, asked in a child Python process.
+
+    Importing torch takes seconds and loads large native libraries; doing that on a thread while
+    Blender runs operators on the main one can crash Blender, so unless torch is already loaded
+    the question goes to a separate interpreter that sees the same packages.
+    """
+    if "torch" in sys.modules:
+        torch = sys.modules["torch"]
         if torch.cuda.is_available():
-            available = True
-            name = torch.cuda.get_device_name(0)
+            return True, torch.cuda.get_device_name(0)
+        return False, ""
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(path for path in sys.path if path))
+    flags = getattr(subprocess, "CREATE_NO_WINDOW", 0)  # no console window flashing on Windows
+    try:
+        answer = subprocess.run([sys.executable, "-c", _PROBE], env=environment,
+                                capture_output=True, text=True, timeout=300, creationflags=flags)
+    except (OSError, subprocess.SubprocessError):
+        return False, ""
+    words = answer.stdout.strip().split(" ", 1) if answer.returncode == 0 else []
+    if words and words[0] == "cuda":
+        return True, words[1] if len(words) > 1 else ""
+    return False, ""
+
+
+def _probe_gpu() -> None:
+    """Find out whether torch sees a CUDA GPU, and keep the answer."""
+    try:
+        available, name = _ask_torch()
     except Exception:  # a broken torch means no GPU for us, not a broken panel
-        available = False
+        available, name = False, ""
     with _gpu_lock:
         _gpu.update(known=True, available=available, name=name)
 
@@ -100,9 +127,10 @@ def _probe_gpu() -> None:
 def gpu_available(wait: bool = False):
     """True when torch sees a CUDA GPU, False when not (or torch is missing), None while unknown.
 
-    Without torch the answer is immediate. With torch it is found out once, on a background
-    thread (importing torch takes seconds, too long for a redraw); ``wait=True`` finds it out
-    now instead. The answer is kept: GPUs do not come and go while Blender runs.
+    Without torch the answer is immediate. With torch it is found out once, by a child process
+    watched from a background thread (importing torch takes seconds, too long for a redraw);
+    ``wait=True`` finds it out now instead. The answer is kept: GPUs do not come and go while
+    Blender runs.
     """
     with _gpu_lock:
         if _gpu["known"]:

@@ -5,6 +5,7 @@ The panel is drawn into a recording stand-in for ``UILayout``, so the bpy module
 check what it would show.
 """
 
+import sys
 import time
 
 import bpy
@@ -330,7 +331,10 @@ def test_the_gpu_probe_agrees_with_torch(extension, monkeypatch):
         expected = torch.cuda.is_available()
     except ImportError:
         expected = False
+    # The probe must not load torch into Blender's process: it asks a child Python instead.
+    monkeypatch.delitem(sys.modules, "torch", raising=False)
     assert dependencies.gpu_available(wait=True) is expected
+    assert "torch" not in sys.modules
 
 
 # --- 4, 5, 8. words -------------------------------------------------------------------------------
