@@ -13,6 +13,7 @@ the field calls the network (``NETWORK_BAND_NODES`` spacings at the default reso
 Farther nodes keep the nearest-point distance whatever the radius, so they teach nothing.
 """
 
+import hashlib
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Dict, Optional
@@ -26,7 +27,6 @@ from engine.selector import parent_features
 from engine.settings import ReconstructSettings
 from ..bench.dataset import CONDITIONS, ScanCondition, make_input, make_shape
 from .mesh_distance import point_mesh_distance
-from .radius_targets import CANDIDATE_RADII
 
 TRAINING_CONDITIONS = ("clean", "sparse", "noisy")
 DENSE_POINTS = 150_000  # 3x the benchmark's clean and noisy scans
@@ -87,11 +87,12 @@ def shape_scene(domain: str, seed: int, queries: int, query_seed: int,
 
 
 def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent_radius: float,
-                cache_dir: Path, query_seed: int = 0,
+                radii: np.ndarray, cache_dir: Path, query_seed: int = 0,
                 condition: Optional[ScanCondition] = None) -> Dict[str, np.ndarray]:
-    """Selector inputs and error curves for one shape (scanned as :func:`shape_scene` says).
+    """Selector inputs and error curves at the candidate ``radii`` for one shape (scanned as
+    :func:`shape_scene` says).
 
-    The error curves (the backbone run seven times: the costly part) are read from
+    The error curves (the backbone run once per radius: the costly part) are read from
     ``cache_dir`` when present and written there otherwise; the selector's inputs are computed
     afresh from the regenerated scene, so a change of features needs no new error curves.
 
@@ -100,15 +101,18 @@ def shape_cache(domain: str, seed: int, predict: Predictor, queries: int, parent
     """
     scene = shape_scene(domain, seed, queries, query_seed, condition)
     scan = "" if condition is None else f"_{condition.name}{condition.count}"
+    radii = np.asarray(radii, dtype=np.float64)
+    grid = (f"_r{radii[0]:.4f}-{radii[-1]:.4f}x{len(radii)}_"
+            f"{hashlib.sha256(np.round(radii, 9).tobytes()).hexdigest()[:6]}")
     path = (Path(cache_dir)
-            / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}{scan}.npz")
+            / f"{domain}_{seed}_{queries}_{query_seed}_band{QUERY_BAND:.4f}{scan}{grid}.npz")
     if path.exists():
         with np.load(path) as data:
             errors = data["errors"]
     else:
         errors = np.stack([np.abs(backbone_udf(predict, scene["tree"], scene["points"],
                                                scene["queries"], r) - scene["udf"])
-                           for r in CANDIDATE_RADII], axis=1).astype(np.float32)
+                           for r in radii], axis=1).astype(np.float32)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.stem + ".tmp.npz")
         np.savez(tmp, errors=errors, udf=scene["udf"].astype(np.float32))

@@ -7,7 +7,8 @@
 1. Error curves: for ``--shapes`` car and garment *training* shapes each (benchmark train seeds,
    disjoint from the test seeds), and ``--dense-shapes`` more each scanned with
    ``--dense-points`` points, ``--queries`` band queries per shape, the backbone's absolute
-   UDF error at the K = 7 candidate radii 0.012 ... 0.024 (cached per shape, resumable).
+   UDF error at ``--candidates`` radii from rho_min R to rho_max R, evenly spaced in r or in
+   log r (``--spacing``; the defaults: K = 7, 0.012 ... 0.024), cached per shape, resumable.
 2. Targets: each query's curve averaged over its ``--expected-over`` nearest queries of the same
    shape (the expected error there), the parabola vertex through that curve's minimum
    (:mod:`.radius_targets`) kept ``--target-inset`` of the span off the range's ends, loss
@@ -17,8 +18,9 @@
    extra features (code at 0, encoder frozen); then everything trains.
 3. Evaluation on held-out queries of held-out shapes (5 more training seeds per domain, rooms
    included although rooms are never trained on): mean absolute UDF error of every single fixed
-   candidate radius, the curvature policy and the learned selector, run through the backbone at
-   each policy's radii.
+   candidate radius (and the product's default fixed radius), the curvature policy at the
+   product's default range, the learned selector and the per-query oracle, run through the
+   backbone at each policy's radii; per domain and per scan condition.
 """
 
 import argparse
@@ -35,7 +37,8 @@ from engine.field import backbone_predictor
 from engine.selector import NumpySelector, build_selector_torch, predict_radii
 from engine.weights_file import save_weights
 from ..bench.dataset import train_seeds
-from .radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets, loss_weights,
+from engine.settings import ReconstructSettings
+from .radius_targets import (candidate_radii, expected_errors, inset_targets, loss_weights,
                              parabola_targets)
 from .selector_data import (DENSE_POINTS, TRAINING_CONDITIONS, backbone_udf, condition_of,
                             dense_conditions, shape_cache, shape_scene)
@@ -62,13 +65,19 @@ def training_shapes(args):
             yield domain, seed, dense[name], TRAINING_CONDITIONS.index(name)
 
 
+def grid_radii(args) -> np.ndarray:
+    """The K candidate radii the error curves are measured at."""
+    return candidate_radii(args.rho_min * args.parent_radius, args.rho_max * args.parent_radius,
+                           args.candidates, args.spacing)
+
+
 def load_training_set(args, predict):
     parts = []
     shapes = list(training_shapes(args))
     for i, (domain, seed, condition, label) in enumerate(shapes):
         started = time.time()
         part = shape_cache(domain, seed, predict, args.queries, args.parent_radius,
-                           Path(args.cache_dir), condition=condition)
+                           grid_radii(args), Path(args.cache_dir), condition=condition)
         # per shape: the nearest queries must lie on the same surface
         part["expected"] = expected_errors(part["errors"], part["queries"], args.expected_over)
         part["condition"] = np.full(len(part["errors"]), label)
@@ -85,7 +94,8 @@ def train(args, data):
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     r_min, r_max = args.rho_min * args.parent_radius, args.rho_max * args.parent_radius
-    targets = inset_targets(parabola_targets(data["expected"]), r_min, r_max, args.target_inset)
+    targets = inset_targets(parabola_targets(data["expected"], grid_radii(args)), r_min, r_max,
+                            args.target_inset)
     share = np.clip((targets - r_min) / (r_max - r_min), 1e-3, 1 - 1e-3)
     z_max = float(np.abs(np.log(share / (1 - share))).max()) + LOGIT_MARGIN
     targets = torch.from_numpy(targets.astype(np.float32))
@@ -139,34 +149,54 @@ def train(args, data):
 
 
 def evaluate(args, predict, selector):
-    """Mean |UDF error| per policy and domain on held-out shapes (unit frame)."""
+    """Mean |UDF error| per policy, per domain and per scan condition, on held-out shapes (unit
+    frame)."""
+    product = ReconstructSettings()
+    fixed_radii = sorted(set(np.round(grid_radii(args), 6)) | {product.radius})
     results = {}
     for domain in EVAL_DOMAINS:
         seeds = train_seeds(domain, args.shapes + HELD_OUT)[args.shapes:]
-        errors = {f"fixed {r:.3f}": [] for r in CANDIDATE_RADII}
+        errors = {f"fixed {r:.4f}": [] for r in fixed_radii}
         errors.update({"curvature": [], "learned": [], "oracle grid radius": []})
+        conditions = []
         for seed in seeds:
             scene = shape_scene(domain, seed, args.queries, query_seed=1)
             tree, points, queries, udf = (scene[k] for k in ("tree", "points", "queries", "udf"))
+            conditions += [scene["condition"]] * len(queries)
             per_radius = []
-            for r in CANDIDATE_RADII:
+            for r in fixed_radii:
                 err = np.abs(backbone_udf(predict, tree, points, queries, r) - udf)
-                errors[f"fixed {r:.3f}"].append(err)
+                errors[f"fixed {r:.4f}"].append(err)
                 per_radius.append(err)
             errors["oracle grid radius"].append(np.min(per_radius, axis=0))
-            radii = curvature_radii(tree, points, queries, args.parent_radius,
-                                    args.rho_min, args.rho_max)
+            radii = curvature_radii(tree, points, queries, product.parent_radius,
+                                    product.rho_min, product.rho_max)
             errors["curvature"].append(np.abs(backbone_udf(predict, tree, points, queries,
                                                            radii) - udf))
             radii = predict_radii(selector, tree, points, queries, args.parent_radius,
                                   args.rho_min, args.rho_max)
             errors["learned"].append(np.abs(backbone_udf(predict, tree, points, queries,
                                                          radii) - udf))
-        results[domain] = {k: float(np.mean(np.concatenate(v))) for k, v in errors.items()}
-        fixed = {k: v for k, v in results[domain].items() if k.startswith("fixed")}
-        results[domain]["best fixed"] = min(fixed.values())
+            errors.setdefault("learned radius", []).append(radii)
+        conditions = np.array(conditions)
+        joined = {k: np.concatenate(v) for k, v in errors.items()}
+        results[domain] = summary(joined)
+        for name in TRAINING_CONDITIONS:
+            if (conditions == name).any():
+                results[domain][name] = summary({k: v[conditions == name]
+                                                 for k, v in joined.items()})
         print(domain, json.dumps(results[domain]), flush=True)
     return results
+
+
+def summary(errors) -> dict:
+    """Means of each policy's errors (and of the learned radii), with the best fixed radius."""
+    means = {k: float(np.mean(v)) for k, v in errors.items()}
+    fixed = {k: v for k, v in means.items() if k.startswith("fixed")}
+    best = min(fixed, key=fixed.get)
+    means["best fixed"] = fixed[best]
+    means["best fixed radius"] = float(best.split()[1])
+    return means
 
 
 def main(argv=None):
@@ -194,6 +224,12 @@ def main(argv=None):
     parser.add_argument("--parent-radius", type=float, default=0.024)
     parser.add_argument("--rho-min", type=float, default=0.5)
     parser.add_argument("--rho-max", type=float, default=1.0)
+    parser.add_argument("--candidates", type=int, default=7,
+                        help="K: radii the error curves are measured at, from rho_min R to "
+                             "rho_max R")
+    parser.add_argument("--spacing", choices=("linear", "log"), default="linear",
+                        help="candidate radii evenly spaced in r or in log r (a range spanning "
+                             "a factor of several)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args(argv)

@@ -170,7 +170,8 @@ def test_training_learns_a_radius_from_the_noise_features():
     data = {"rel": rel, "mask": mask, "extra": extra, "expected": curves,
             "condition": noisy.astype(np.int64)}
     args = argparse.Namespace(seed=0, threads=1, rho_min=0.5, rho_max=1.0, parent_radius=0.024,
-                              target_inset=0.005, epochs=4, head_epochs=2, batch=256, lr=3e-3)
+                              candidates=7, spacing="linear", target_inset=0.005, epochs=4,
+                              head_epochs=2, batch=256, lr=3e-3)
     model = train(args, data).eval()
     with torch.no_grad():
         s = model(torch.from_numpy(rel), torch.from_numpy(mask), torch.from_numpy(extra)).numpy()
@@ -187,8 +188,9 @@ def test_dense_training_scans_are_cached_apart_and_fill_the_parent_balls(tmp_pat
         return np.zeros(len(rel), dtype=np.float32)
 
     seed = train_seeds("cars", 46)[45]
-    own = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path)
-    dense = shape_cache("cars", seed, zeros, 200, 0.024, tmp_path,
+    radii = np.linspace(0.012, 0.024, 7)
+    own = shape_cache("cars", seed, zeros, 200, 0.024, radii, tmp_path)
+    dense = shape_cache("cars", seed, zeros, 200, 0.024, radii, tmp_path,
                         condition=dense_conditions(150_000)["clean"])
     assert len(list(tmp_path.glob("*.npz"))) == 2  # one file per scan: no stale curves
     assert own["errors"].shape == dense["errors"].shape == (200, 7)

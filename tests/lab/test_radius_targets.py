@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from lab.training.radius_targets import (CANDIDATE_RADII, expected_errors, inset_targets,
-                                         loss_weights, parabola_targets, selector_loss)
+from lab.training.radius_targets import (CANDIDATE_RADII, candidate_radii, expected_errors,
+                                         inset_targets, loss_weights, parabola_targets,
+                                         selector_loss)
 
 
 def test_candidate_radii_are_the_papers_seven():
@@ -80,3 +81,15 @@ def test_inset_keeps_targets_off_the_ends_of_the_range():
     np.testing.assert_allclose(inset_targets(targets, 0.012, 0.024, 0.05),
                                [0.0126, 0.0126, 0.018, 0.0234])
     np.testing.assert_array_equal(inset_targets(targets, 0.012, 0.024, 0.0), targets)
+
+
+def test_log_spaced_radii_take_the_parabola_in_log_r():
+    radii = candidate_radii(0.015, 0.072, 10, "log")
+    np.testing.assert_allclose(radii[1] / radii[0], radii[-1] / radii[-2])
+    vertex = 0.033
+    errors = 2.0 * (np.log(radii) - np.log(vertex)) ** 2 + 0.01
+    assert parabola_targets(errors[None], radii)[0] == pytest.approx(vertex, rel=1e-9)
+    # at the ends: the end radius itself
+    assert parabola_targets((radii - 0.01)[None], radii)[0] == pytest.approx(0.015, rel=1e-12)
+    with pytest.raises(ValueError, match="evenly spaced"):
+        parabola_targets(errors[None], np.array([0.01, 0.02, 0.05] + list(radii[3:])))
