@@ -3,7 +3,8 @@
 The grid covers the points' bounding box plus a margin, with spacing ``h = 1 / resolution`` and
 the exact index-to-position map ``x = origin + i * h`` (``indexing='ij'``). Only the *band* is
 evaluated: the nodes within distance R of some input point, with R the largest ball radius of
-the radius policy (widened to ``MIN_BAND_NODES`` spacings on coarse grids). They are found
+the radius policy, at most ``BAND_RADIUS_CAP`` (widened to ``MIN_BAND_NODES`` spacings on coarse
+grids). They are found
 without a k-d tree query per grid node: the points are voxelised onto the grid, the occupancy is
 dilated by a cube of half-width ``ceil(R / h + 1/2)`` nodes (a superset of the band) and only
 those candidates are checked against the exact nearest-point distance.
@@ -62,6 +63,11 @@ SPARSE_BAND_NODES = 5.0
 SPARSE_NEIGHBOUR = 4
 # Margin beyond the band radius on each side of the grid, in nodes.
 MARGIN_NODES = 3
+# The band reaches at most this far from the points (working frame) whatever the largest ball:
+# the network's nodes lie within SPARSE_BAND_NODES spacings of a point and the rest only have
+# to stand above the mesher's iso-level, so a wider band (the learned mode's balls reach 0.072)
+# would cost time and memory for nodes that hold nearest-point distances.
+BAND_RADIUS_CAP = 0.024
 # The band is at least this many spacings wide, so that the mesher sees a few nodes of true
 # distance on each side of the surface even when the ball radius is below one spacing.
 MIN_BAND_NODES = 3
@@ -256,7 +262,7 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     started = time.perf_counter()
     progress(0.0, "finding the query band")
     spacing = 1.0 / settings.resolution
-    band_radius = max(max_radius(settings), MIN_BAND_NODES * spacing)
+    band_radius = max(min(max_radius(settings), BAND_RADIUS_CAP), MIN_BAND_NODES * spacing)
     shape, origin, spacing = grid_layout(points, settings.resolution, band_radius, anchor,
                                          bounds)
     indices, nearest = find_band(tree, points, shape, origin, spacing, band_radius, cancel)

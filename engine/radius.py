@@ -2,11 +2,14 @@
 
 ``fixed`` gives every query the settings' radius (LoSF-UDF). ``curvature`` (a GeoLA-style
 heuristic, :mod:`.curvature`) and ``learned`` (the selector network) choose a radius per query in
-[rho_min * R, rho_max * R] from the points of the parent ball of radius R.
+[rho_min * R, rho_max * R] from the points of the parent ball of radius R. Each of the two has
+its own range (:data:`MODE_RANGES`) unless the settings ask for a custom one
+(:func:`radius_range`): the selector's is the range it was trained for, wider than the
+curvature heuristic's, which on clean scans wants nothing past 0.024.
 """
 
 import functools
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
@@ -14,9 +17,15 @@ from .cpu_threads import cpu_threads
 from .devices import resolve_device
 from .errors import InputError
 from .patches import Neighbours
-from .settings import ReconstructSettings
+from .settings import MODE_RANGES, ReconstructSettings
 
 RadiusPolicy = Callable[..., np.ndarray]
+
+def radius_range(settings: ReconstructSettings) -> Tuple[float, float, float]:
+    """(R, rho_min, rho_max) the policy of ``settings`` works in (unit frame)."""
+    if settings.custom_range or settings.radius_mode not in MODE_RANGES:
+        return float(settings.parent_radius), float(settings.rho_min), float(settings.rho_max)
+    return MODE_RANGES[settings.radius_mode]
 
 
 def fixed_radii(settings: ReconstructSettings, tree, points: np.ndarray,
@@ -30,8 +39,7 @@ def curvature_policy(settings: ReconstructSettings, tree, points: np.ndarray,
     """Smaller balls where the parent ball's surface variation is larger: (Q,) float64."""
     from .curvature import curvature_radii
 
-    return curvature_radii(tree, points, queries, settings.parent_radius,
-                           settings.rho_min, settings.rho_max, neighbours)
+    return curvature_radii(tree, points, queries, *radius_range(settings), neighbours)
 
 
 def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
@@ -40,8 +48,8 @@ def learned_policy(settings: ReconstructSettings, tree, points: np.ndarray,
     from .selector import predict_radii
 
     device = resolve_device(settings.device)
-    return predict_radii(_shipped_selector(device), tree, points, queries, settings.parent_radius,
-                         settings.rho_min, settings.rho_max, neighbours,
+    return predict_radii(_shipped_selector(device), tree, points, queries,
+                         *radius_range(settings), neighbours,
                          cpu_threads() if device == "cpu" else 1)
 
 
@@ -75,11 +83,14 @@ def require_policy(settings: ReconstructSettings) -> RadiusPolicy:
 def max_radius(settings: ReconstructSettings) -> float:
     """The largest radius the policy of ``settings`` can return (unit frame).
 
-    The field's query band is every grid node within this distance of an input point.
+    The balls of the field's queries reach this far (a tile's points reach past its core by
+    it); the field's band is every grid node within it of an input point, up to
+    ``engine.field.BAND_RADIUS_CAP``.
     """
     if settings.radius_mode == "fixed":
         return float(settings.radius)
-    return float(settings.rho_max * settings.parent_radius)
+    parent_radius, _, rho_max = radius_range(settings)
+    return float(rho_max * parent_radius)
 
 
 def reads_parent_ball(settings: ReconstructSettings) -> bool:
@@ -95,7 +106,7 @@ def parent_ball(settings: ReconstructSettings, tree, queries: np.ndarray) -> Nei
     """
     from .selector import parent_neighbours
 
-    return parent_neighbours(tree, queries, settings.parent_radius)
+    return parent_neighbours(tree, queries, radius_range(settings)[0])
 
 
 def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
@@ -106,8 +117,7 @@ def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
     Parameters
     ----------
     settings : ReconstructSettings
-        ``radius_mode`` picks the policy; ``radius``, ``parent_radius``, ``rho_min``,
-        ``rho_max`` bound it.
+        ``radius_mode`` picks the policy; ``radius`` or :func:`radius_range` bounds it.
     tree : scipy.spatial.cKDTree
         Built over ``points``.
     points : (N, 3) float array

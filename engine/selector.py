@@ -9,7 +9,9 @@ as ``rel = (p - q) / R`` (the patch contract of :mod:`engine.patches`). Features
 - log(1 + N) with N the points in the parent ball (saturating at PARENT_POINTS);
 - a 6-bin radial density histogram: the share of the ball's points in each shell of width R/6;
 - the patch's roughness (:mod:`engine.patch_roughness`: thickness across its plane and the
-  residual of a fitted quadric), which tells noisy patches from clean ones.
+  residual of a fitted quadric), which tells noisy patches from clean ones, over the strided
+  patch and over the NEAR_POINTS nearest points alone: noise roughens both, a second sheet or
+  a crease a few point spacings away only the first.
 
 These extra features are standardised inside the network (``extra_mean``, ``extra_scale``: the
 training set's mean and inverse standard deviation, stored with the weights): unscaled, their
@@ -40,7 +42,8 @@ DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
 PARENT_POINTS = 128
 STRIDE = 4
 HISTOGRAM_BINS = 6
-EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2  # log count, histogram, roughness
+NEAR_POINTS = 16
+EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2 + 2  # log count, histogram, roughness (strided, near)
 # Queries per numpy forward pass: their per-point activations (256 x about 10 points x 64
 # float32) stay in a core's cache between the layers.
 BATCH = 256
@@ -67,7 +70,8 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     rel : (Q, PARENT_POINTS // STRIDE, 3) float32, strided parent-patch points / R
     mask : (Q, PARENT_POINTS // STRIDE) bool
     extra : (Q, EXTRA_FEATURES) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram,
-        roughness (thickness, quadric residual)], as measured (standardised in the network)
+        roughness (thickness, quadric residual) of the strided patch and of the NEAR_POINTS
+        nearest], as measured (standardised in the network)
     """
     if neighbours is None:  # chunk by chunk: the lists take 2 kB per query
         parts = [parent_features(tree, points, queries[start:start + QUERY_CHUNK], parent_radius,
@@ -93,7 +97,11 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     hist = np.diff(below, axis=1) / np.maximum(counts, 1)[:, None]
     log_count = np.log1p(counts) / np.log1p(PARENT_POINTS)
     roughness = patch_roughness(rel, mask, threads)
-    extra = np.column_stack([log_count, hist, roughness]).astype(np.float32)
+    near = Neighbours(neighbours.distance[:, :NEAR_POINTS], neighbours.index[:, :NEAR_POINTS])
+    near_rel, near_mask, _ = patches_from_neighbours(points, queries, near, parent_radius,
+                                                     NEAR_POINTS)
+    near_roughness = patch_roughness(near_rel, near_mask, threads)
+    extra = np.column_stack([log_count, hist, roughness, near_roughness]).astype(np.float32)
     return rel, mask, extra
 
 

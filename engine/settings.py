@@ -114,6 +114,14 @@ UDF_SOURCE_CHOICES = (
 )
 
 RADIUS_MODES = tuple(choice.value for choice in RADIUS_MODE_CHOICES)
+MODE_RANGES = {
+    "curvature": (0.024, 0.5, 1.0),
+    # the shipped selector's training range (engine/weights/selector.json): 0.015 to 0.072
+    "learned": (0.072, 0.015 / 0.072, 1.0),
+}
+"""(R, rho_min, rho_max) of the per-query radius modes unless ``custom_range`` is set: the
+selector's is the range it was trained for; the curvature heuristic's stops at 0.024, past which
+clean scans lose accuracy (engine/weights/SELECTOR_CARD.md)."""
 DEVICES = tuple(choice.value for choice in DEVICE_CHOICES)
 """The device settings of the reconstruction and of the mesher."""
 OUTLIER_POLICIES = tuple(choice.value for choice in OUTLIER_CHOICES)
@@ -153,21 +161,32 @@ class ReconstructSettings:
         "thin parts and detail",
         help="ball radius of the fixed mode, working frame",
         low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
+    custom_range: bool = setting(
+        False, "Custom Range",
+        "Set the radius range yourself. Off: each mode uses its own tuned range (Curvature "
+        "0.012 to 0.024, Learned 0.015 to 0.072)",
+        help="use --parent-radius, --rho-min and --rho-max instead of the radius mode's own "
+             "range (curvature: R 0.024, rho 0.5 to 1; learned: the range its selector was "
+             "trained for, R 0.072, rho 0.208 to 1); giving any of those flags sets it")
     parent_radius: float = setting(
         0.024, "Largest Radius",
         "The biggest neighbourhood any spot may use, as a fraction of Resolution cells (the "
         "cloud's longest side unless Detail makes the cells finer). Each spot gets a radius "
         "between Range Min and Max times this. Larger fills holes and smooths noise; smaller "
         "keeps thin parts and detail",
-        help="parent ball radius R of the curvature and learned modes, working frame",
-        low=0.001, high=0.2, soft_min=0.005, soft_max=0.06, step=0.1, precision=3)
+        help="parent ball radius R of the curvature and learned modes, working frame (with "
+             "--custom-range)",
+        implies=(("custom_range", True),),
+        low=0.001, high=0.2, soft_min=0.005, soft_max=0.1, step=0.1, precision=3)
     rho_min: float = setting(
         0.5, "Min", "Smallest radius a spot may get, as a share of the Largest Radius",
-        help="smallest radius as a fraction of R",
+        help="smallest radius as a fraction of R (with --custom-range)",
+        implies=(("custom_range", True),),
         low=0.05, high=1, step=1, precision=2, subtype="FACTOR")
     rho_max: float = setting(
         1.0, "Max", "Biggest radius a spot may get, as a share of the Largest Radius",
-        help="largest radius as a fraction of R",
+        help="largest radius as a fraction of R (with --custom-range)",
+        implies=(("custom_range", True),),
         low=0.05, high=1, step=1, precision=2, subtype="FACTOR")
     resolution: int = setting(
         256, "Resolution",

@@ -84,7 +84,8 @@ def finish_job(operator, context, job: Job) -> set:
         operator.report({'ERROR'}, "No surface was found. Raise the radius or lower the "
                                    "resolution, then try again.")
         return {'CANCELLED'}
-    for notice in wording.user_notices(result.messages, job.settings.radius_mode):
+    for notice in wording.user_notices(result.messages, job.settings.radius_mode,
+                                       job.settings.custom_range):
         operator.report({'WARNING'}, notice)
     # Looked up by name: an undo while the job ran invalidates references to bpy data.
     source = bpy.data.objects.get(job.source_name)

@@ -65,13 +65,15 @@ _KEPT = re.compile(r"kept ([\d,]+) isolated points \(([\d.]+) %\)")
 _SPARSE = re.compile(r"the balls hold only ([\d.]+) points")
 
 
-def user_notices(messages, radius_mode: str = "fixed") -> list:
+def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = False) -> list:
     """The engine notes a user can act on, reworded: what happened and what to do about it.
 
     Every other note (the mesher's iso-value, cut and piece diagnostics) is for the system
     console only.
     """
-    radius = "Radius" if radius_mode == "fixed" else "Largest Radius"
+    radius = "Radius"
+    if radius_mode != "fixed":
+        radius = "Largest Radius" if custom_range else "Largest Radius (turn on Custom Range)"
     notices = []
     for message in messages:
         match = _OUTLIERS.search(message)

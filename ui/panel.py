@@ -3,6 +3,7 @@
 import bpy
 
 from ..engine.detail import cell_size
+from ..engine.settings import MODE_RANGES
 from ..runtime import bridge, dependencies
 from ..runtime.job import running_job
 from .properties import DEVICE_ITEMS, scene_settings
@@ -85,13 +86,17 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
             if extent:
                 body.label(text=f"Radius {_length(context, props.radius, scale)}")
         else:
-            body.prop(props, "parent_radius")
-            column = body.column(align=True)
-            column.prop(props, "rho_min", text="Range Min")
-            column.prop(props, "rho_max", text="Max")
+            body.prop(props, "custom_range")
+            if props.custom_range:
+                body.prop(props, "parent_radius")
+                column = body.column(align=True)
+                column.prop(props, "rho_min", text="Range Min")
+                column.prop(props, "rho_max", text="Max")
+                parent, rho_min, rho_max = props.parent_radius, props.rho_min, props.rho_max
+            else:
+                parent, rho_min, rho_max = MODE_RANGES[props.radius_mode]
             if extent:
-                low = props.rho_min * props.parent_radius
-                high = props.rho_max * props.parent_radius
+                low, high = rho_min * parent, rho_max * parent
                 body.label(text=f"Radius {_length(context, low, scale)} "
                                 f"to {_length(context, high, scale)}")
         body.prop(props, "detail")

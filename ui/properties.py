@@ -11,7 +11,7 @@ from dataclasses import fields
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..engine.settings import DEVICE_CHOICES, ReconstructSettings, setting_info
+from ..engine.settings import DEVICE_CHOICES, MODE_RANGES, ReconstructSettings, setting_info
 
 INT_LIMIT = 2 ** 31 - 1  # Blender's integer properties are 32-bit signed
 
@@ -73,6 +73,12 @@ def _rho_max_changed(self, context):
         self.rho_min = self.rho_max
 
 
+def _custom_range_changed(self, context):
+    # A custom range starts from the mode's own, which the panel showed until now.
+    if self.custom_range and self.radius_mode in MODE_RANGES:
+        self.parent_radius, self.rho_min, self.rho_max = MODE_RANGES[self.radius_mode]
+
+
 DEVICE_ITEMS = enum_items(DEVICE_CHOICES)
 
 UDFR_SceneSettings = property_group(
@@ -83,7 +89,8 @@ UDFR_SceneSettings = property_group(
         description="Hide the point cloud once its mesh is made, so the mesh can be seen (the "
                     "eye icon in the Outliner shows it again)",
         default=True)},
-    updates={"rho_min": _rho_min_changed, "rho_max": _rho_max_changed})
+    updates={"rho_min": _rho_min_changed, "rho_max": _rho_max_changed,
+             "custom_range": _custom_range_changed})
 
 
 def scene_settings(scene):

@@ -403,7 +403,7 @@ def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
     assert len(warnings) == 3, warnings
     assert "Dropped 1,234 stray points (2.5 %)" in warnings[0]
     assert "Advanced > Outliers to Keep" in warnings[0]
-    assert "raise Largest Radius" in warnings[1]
+    assert "raise Largest Radius (turn on Custom Range)" in warnings[1]
     assert "Kept 20 stray-looking points (0.25 %)" in warnings[2]
     assert "Advanced > Outliers to Drop" in warnings[2]
     for _, message in reports.messages:
@@ -433,9 +433,33 @@ def test_engine_refusals_are_reported_as_sentences(quick):
     assert message[0].isupper() and message.endswith("."), message
 
 
+def test_each_mode_shows_its_own_range_until_custom_range_is_on(quick, extension):
+    props = quick.udf_reconstruction
+    add_cloud("Scan", sphere_points(POINTS, 1.0))  # longest side 2
+    props.radius_mode = "learned"
+    drawn = draw(extension)
+    props_drawn = {entry[1] for entry in drawn.log if entry[0] == "prop"}
+    assert "custom_range" in props_drawn and "rho_min" not in props_drawn
+    assert "Radius 3 cm to 14.4 cm" in drawn.labels  # 0.015 to 0.072 of 2 m
+    props.radius_mode = "curvature"
+    assert "Radius 2.4 cm to 4.8 cm" in draw(extension).labels
+    props.radius_mode = "learned"
+    props.custom_range = True  # starts from the learned range
+    assert (props.parent_radius, props.rho_max) == pytest.approx((0.072, 1.0))
+    assert props.rho_min == pytest.approx(0.015 / 0.072, abs=1e-6)
+    props.rho_min = 0.5
+    drawn = draw(extension)
+    assert drawn.prop("rho_min")
+    assert "Radius 7.2 cm to 14.4 cm" in drawn.labels
+    settings = extension.module("ui.properties").to_settings(props)
+    assert extension.module("engine.radius").radius_range(settings) == \
+        pytest.approx((0.072, 0.5, 1.0))
+
+
 def test_radius_range_fields_are_labelled_for_artists(quick, extension):
     props = quick.udf_reconstruction
     props.radius_mode = "learned"
+    props.custom_range = True
     add_cloud("Scan", sphere_points(POINTS, 1.0))
     drawn = draw(extension)
     assert drawn.prop("rho_min")[2] == "Range Min"

@@ -10,7 +10,7 @@ from engine.errors import Cancelled, InputError
 from engine.geometry import PointCloud
 from engine.reconstruct import reconstruct
 from engine.sampling import sample_surface
-from engine.settings import ReconstructSettings
+from engine.settings import MODE_RANGES, ReconstructSettings
 
 # small grids keep the suite fast; the quality thresholds below were measured at these sizes
 FAST = ReconstructSettings(resolution=32, device="cpu")
@@ -238,7 +238,8 @@ def test_learned_mode_end_to_end_on_a_noisy_sphere(monkeypatch):
     print(errors)
     radii = np.concatenate(chosen)
     assert len(radii) >= result.stats["queries"] > 10_000
-    assert radii.min() >= 0.5 * 0.024 - 1e-9 and radii.max() <= 0.024 + 1e-9
+    parent, rho_min, rho_max = MODE_RANGES["learned"]
+    assert radii.min() >= rho_min * parent - 1e-9 and radii.max() <= rho_max * parent + 1e-9
     # one sheet (the mesher may leave a few stray triangles inside the noisy shell)
     _, labels = vertex_components(len(result.mesh.vertices), result.mesh.faces)
     assert np.bincount(labels).max() >= 0.98 * len(result.mesh.vertices)
