@@ -12,8 +12,8 @@ Two numbers per patch, both scale-free (distances in units of the parent radius 
   follows smooth curvature, so what remains is mostly noise (and creases or a second sheet).
 
 Patches with fewer than MIN_POINTS points get 0 for both (too few to fit a quadric); the
-selector also reads the point count. The selector passes its strided parent patch (32 of the
-128 nearest points, spread over the whole ball): the points are already gathered, and the fit
+selector also reads the point count. The selector passes its strided parent patch (16 of the
+64 nearest points) and its 16 nearest points: the points are already gathered, and each fit
 costs a few microseconds per query.
 """
 

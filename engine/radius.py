@@ -101,7 +101,7 @@ def reads_parent_ball(settings: ReconstructSettings) -> bool:
 def parent_ball(settings: ReconstructSettings, tree, queries: np.ndarray) -> Neighbours:
     """The nearest points within the parent radius R of each query, as the policies read them.
 
-    The lists hold the selector's PARENT_POINTS (128) nearest, more than the curvature estimate
+    The lists hold the selector's PARENT_POINTS (64) nearest, as many as the curvature estimate
     and the backbone's patch need: both are cut from them (:func:`patches_from_neighbours`).
     """
     from .selector import parent_neighbours

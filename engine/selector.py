@@ -39,7 +39,7 @@ from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
 from .weights_file import read_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "selector.npz"
-PARENT_POINTS = 128
+PARENT_POINTS = 64
 STRIDE = 4
 HISTOGRAM_BINS = 6
 NEAR_POINTS = 16

@@ -3,8 +3,9 @@ import pytest
 import torch  # a runtime requirement (requirements.txt): never skipped
 from scipy.spatial import cKDTree
 
-from engine.selector import (DEFAULT_CONFIG, EXTRA_FEATURES, HISTOGRAM_BINS, NumpySelector,
-                             build_selector_torch, macs_per_query, parent_features, predict_radii)
+from engine.selector import (DEFAULT_CONFIG, EXTRA_FEATURES, HISTOGRAM_BINS, PARENT_POINTS,
+                             STRIDE, NumpySelector, build_selector_torch, macs_per_query,
+                             parent_features, predict_radii)
 from engine.settings import MODE_RANGES
 
 
@@ -63,7 +64,8 @@ def test_one_querys_answer_does_not_depend_on_the_rest_of_the_batch():
 def test_parent_features_histogram_and_count():
     points = _cloud(4, 5000)
     rel, mask, extra = parent_features(cKDTree(points), points, points[:50], 0.024)
-    assert rel.shape == (50, 32, 3) and mask.shape == (50, 32)
+    strided = PARENT_POINTS // STRIDE
+    assert rel.shape == (50, strided, 3) and mask.shape == (50, strided)
     assert extra.shape == (50, EXTRA_FEATURES)
     np.testing.assert_allclose(extra[:, 1:1 + HISTOGRAM_BINS].sum(axis=1), 1.0, atol=1e-6)
     assert np.all(np.linalg.norm(rel[mask], axis=1) <= 1.0 + 1e-6)
@@ -192,10 +194,12 @@ def test_dense_training_scans_are_cached_apart_and_fill_the_parent_balls(tmp_pat
 
     seed = train_seeds("cars", 46)[45]
     radii = np.linspace(0.012, 0.024, 7)
-    own = shape_cache("cars", seed, zeros, 200, 0.024, radii, tmp_path)
-    dense = shape_cache("cars", seed, zeros, 200, 0.024, radii, tmp_path,
+    # a parent radius small enough that a 50 000-point scan's balls hold fewer than the
+    # PARENT_POINTS the selector reads
+    own = shape_cache("cars", seed, zeros, 200, 0.012, radii, tmp_path)
+    dense = shape_cache("cars", seed, zeros, 200, 0.012, radii, tmp_path,
                         condition=dense_conditions(150_000)["clean"])
     assert len(list(tmp_path.glob("*.npz"))) == 2  # one file per scan: no stale curves
     assert own["errors"].shape == dense["errors"].shape == (200, 7)
-    # log(1 + N) / log(129): 3x the points in every parent ball, up to the 128 it reads
+    # log(1 + N) / log(1 + PARENT_POINTS): 3x the points in every parent ball
     assert np.median(dense["extra"][:, 0]) > np.median(own["extra"][:, 0]) + 0.1
