@@ -49,7 +49,7 @@ EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2 + 2  # log count, histogram, roughness (
 BATCH = 256
 
 DEFAULT_CONFIG = {
-    "hidden": 32,      # H of the ResNet-PointNet
+    "hidden": 16,      # H of the ResNet-PointNet
     "blocks": 3,       # ResNet blocks
     "code": 256,       # the patch code's width (the paper's 256-d feature)
     "mlp": [128, 64],  # hidden widths of the 3-layer MLP
