@@ -13,6 +13,9 @@ import numpy as np
 MAX_POINTS = 64
 # Queries per k-d tree call: bounds memory at about chunk * max_points * 16 bytes of neighbours.
 QUERY_CHUNK = 16384
+# Above this share of filled slots a patch batch is gathered whole (every slot, padding zeroed
+# after), below it point by point: the same values either way, whichever is faster.
+DENSE_GATHER_FILL = 0.5
 
 
 class Neighbours(NamedTuple):
@@ -75,10 +78,15 @@ def patches_from_neighbours(points: np.ndarray, queries: np.ndarray, neighbours:
     if neighbours.distance.shape[1] < max_points:
         raise ValueError("the neighbour lists are shorter than the patch")
     inside = neighbours.distance[:, :max_points] <= radii[:, None]
-    rows, columns = np.nonzero(inside)  # only the real points: most balls hold far fewer
-    rel = np.zeros((len(queries), max_points, 3), dtype=np.float32)
-    rel[rows, columns] = ((points[neighbours.index[rows, columns]] - queries[rows])
-                          / radii[rows, None])
+    if inside.mean() > DENSE_GATHER_FILL:  # full balls: one gather of every slot is faster
+        index = np.where(inside, neighbours.index[:, :max_points], 0)
+        rel = ((points[index] - queries[:, None, :]) / radii[:, None, None]).astype(np.float32)
+        rel[~inside] = 0.0
+    else:  # only the real points: most balls hold far fewer
+        rows, columns = np.nonzero(inside)
+        rel = np.zeros((len(queries), max_points, 3), dtype=np.float32)
+        rel[rows, columns] = ((points[neighbours.index[rows, columns]] - queries[rows])
+                              / radii[rows, None])
     return rel, inside, inside.sum(axis=1).astype(np.int64)
 
 

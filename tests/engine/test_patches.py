@@ -99,3 +99,21 @@ def test_short_neighbour_lists_are_refused():
     parent = nearest_within(cKDTree(points), queries, 0.1, 32)
     with pytest.raises(ValueError, match="shorter"):
         patches_from_neighbours(points, queries, parent, 0.1, 64)
+
+
+def test_full_and_sparse_batches_are_gathered_alike(monkeypatch):
+    """Balls that fill their patch take the whole-batch gather, sparse ones the point-by-point
+    one; both give what the other would."""
+    import engine.patches as patches
+
+    rng = np.random.default_rng(3)
+    points = rng.random((3000, 3))
+    queries = rng.random((200, 3))
+    neighbours = patches.nearest_within(cKDTree(points), queries, 0.2, 32)
+    for radius in (0.2, 0.05):  # nearly every slot filled; a few
+        monkeypatch.setattr(patches, "DENSE_GATHER_FILL", 0.5)
+        chosen = patches.patches_from_neighbours(points, queries, neighbours, radius, 32)
+        monkeypatch.setattr(patches, "DENSE_GATHER_FILL", 2.0 if chosen[1].mean() > 0.5 else -1.0)
+        other = patches.patches_from_neighbours(points, queries, neighbours, radius, 32)
+        for a, b in zip(chosen, other):
+            np.testing.assert_array_equal(a, b)
