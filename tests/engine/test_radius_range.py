@@ -76,3 +76,15 @@ def test_a_large_fixed_radius_keeps_its_balls_but_not_its_band():
                              udf_source="nearest")
     assert field.stats["band_radius"] == pytest.approx(BAND_RADIUS_CAP)
     assert max_radius(ReconstructSettings(radius=0.05)) == pytest.approx(0.05)
+
+
+def test_the_custom_range_tooltip_names_each_modes_range():
+    from dataclasses import fields
+
+    from engine.settings import setting_info
+
+    item = next(f for f in fields(ReconstructSettings) if f.name == "custom_range")
+    text = setting_info(item).description
+    for mode in ("curvature", "learned"):
+        parent, rho_min, rho_max = MODE_RANGES[mode]
+        assert f"{mode.title()} {rho_min * parent:.3f} to {rho_max * parent:.3f}" in text
