@@ -3,13 +3,13 @@
 ``fixed`` gives every query the settings' radius (LoSF-UDF). ``curvature`` (a GeoLA-style
 heuristic, :mod:`.curvature`) and ``learned`` (the selector network) choose a radius per query in
 [rho_min * R, rho_max * R] from the points of the parent ball of radius R. Each of the two has
-its own range (:data:`MODE_RANGES`) unless the settings ask for a custom one
-(:func:`radius_range`): the selector's is the range it was trained for, wider than the
+its own range (``engine.settings.MODE_RANGES``) unless the settings ask for a custom one
+(``engine.settings.radius_range``): the selector's is the range it was trained for, wider than the
 curvature heuristic's, which on clean scans wants nothing past 0.024.
 """
 
 import functools
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, Optional
 
 import numpy as np
 
@@ -17,15 +17,9 @@ from .cpu_threads import cpu_threads
 from .devices import resolve_device
 from .errors import InputError
 from .patches import Neighbours
-from .settings import MODE_RANGES, ReconstructSettings
+from .settings import ReconstructSettings, radius_range
 
 RadiusPolicy = Callable[..., np.ndarray]
-
-def radius_range(settings: ReconstructSettings) -> Tuple[float, float, float]:
-    """(R, rho_min, rho_max) the policy of ``settings`` works in (unit frame)."""
-    if settings.custom_range or settings.radius_mode not in MODE_RANGES:
-        return float(settings.parent_radius), float(settings.rho_min), float(settings.rho_max)
-    return MODE_RANGES[settings.radius_mode]
 
 
 def fixed_radii(settings: ReconstructSettings, tree, points: np.ndarray,
@@ -117,7 +111,7 @@ def radii_for_queries(settings: ReconstructSettings, tree, points: np.ndarray,
     Parameters
     ----------
     settings : ReconstructSettings
-        ``radius_mode`` picks the policy; ``radius`` or :func:`radius_range` bounds it.
+        ``radius_mode`` picks the policy; ``radius`` or ``radius_range(settings)`` bounds it.
     tree : scipy.spatial.cKDTree
         Built over ``points``.
     points : (N, 3) float array

@@ -122,6 +122,15 @@ MODE_RANGES = {
 """(R, rho_min, rho_max) of the per-query radius modes unless ``custom_range`` is set: the
 selector's is the range it was trained for; the curvature heuristic's stops at 0.024, past which
 clean scans lose accuracy (engine/weights/SELECTOR_CARD.md)."""
+
+
+def radius_range(settings) -> Tuple[float, float, float]:
+    """(R, rho_min, rho_max) the radius policy of ``settings`` works in (unit frame): the mode's
+    own range, or the settings' when ``custom_range`` is set. Anything with those attributes
+    will do (the panel passes its properties)."""
+    if settings.custom_range or settings.radius_mode not in MODE_RANGES:
+        return float(settings.parent_radius), float(settings.rho_min), float(settings.rho_max)
+    return MODE_RANGES[settings.radius_mode]
 DEVICES = tuple(choice.value for choice in DEVICE_CHOICES)
 """The device settings of the reconstruction and of the mesher."""
 OUTLIER_POLICIES = tuple(choice.value for choice in OUTLIER_CHOICES)

@@ -3,7 +3,7 @@
 import bpy
 
 from ..engine.detail import cell_size
-from ..engine.settings import MODE_RANGES
+from ..engine.settings import radius_range
 from ..runtime import bridge, dependencies
 from ..runtime.job import running_job
 from .properties import DEVICE_ITEMS, scene_settings
@@ -92,10 +92,8 @@ class UDFR_PT_reconstruct(bpy.types.Panel):
                 column = body.column(align=True)
                 column.prop(props, "rho_min", text="Range Min")
                 column.prop(props, "rho_max", text="Max")
-                parent, rho_min, rho_max = props.parent_radius, props.rho_min, props.rho_max
-            else:
-                parent, rho_min, rho_max = MODE_RANGES[props.radius_mode]
             if extent:
+                parent, rho_min, rho_max = radius_range(props)
                 low, high = rho_min * parent, rho_max * parent
                 body.label(text=f"Radius {_length(context, low, scale)} "
                                 f"to {_length(context, high, scale)}")

@@ -452,7 +452,7 @@ def test_each_mode_shows_its_own_range_until_custom_range_is_on(quick, extension
     assert drawn.prop("rho_min")
     assert "Radius 7.2 cm to 14.4 cm" in drawn.labels
     settings = extension.module("ui.properties").to_settings(props)
-    assert extension.module("engine.radius").radius_range(settings) == \
+    assert extension.module("engine.settings").radius_range(settings) == \
         pytest.approx((0.072, 0.5, 1.0))
 
 

@@ -8,9 +8,9 @@ import pytest
 
 from engine.commands import reconstruct as reconstruct_command
 from engine.field import BAND_RADIUS_CAP, compute_udf_band
-from engine.radius import max_radius, radii_for_queries, radius_range
+from engine.radius import max_radius, radii_for_queries
 from engine.selector import DEFAULT_WEIGHTS
-from engine.settings import MODE_RANGES, ReconstructSettings
+from engine.settings import MODE_RANGES, ReconstructSettings, radius_range
 
 
 def test_the_learned_range_is_the_one_the_shipped_selector_was_trained_for():
