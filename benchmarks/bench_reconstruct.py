@@ -71,8 +71,22 @@ def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mod
             "network_queries": stats.get("network_queries", 0),
             "radius_s": stats.get("seconds_radius", 0.0),
             "parent_s": stats.get("seconds_parent_ball", 0.0),
+            "lattice_step": stats.get("lattice_step", 1),
+            "lattice_positions": stats.get("lattice_positions", 0),
             "iterations": stats["meshing"].get("iterations", 0),
             "macs_per_query": _macs_per_query(stats["mean_patch_points"])}
+
+
+def _policy_detail(row: dict, queries: int, rest: float) -> str:
+    """Where the radius policy ran: on a lattice of the grid, or at every query with its
+    parent-ball search (whose lists also give the backbone its patches)."""
+    if row["lattice_step"] > 1:
+        return (f"(on a lattice of every {row['lattice_step']}th node: "
+                f"{row['lattice_positions']:,} positions, "
+                f"{100 * row['lattice_positions'] / queries:.0f}% of the queries)")
+    return (f"(its parent-ball neighbour search, whose lists also give the backbone its "
+            f"patches: {1e6 * row['parent_s'] / queries:.1f} us per query; the policy without "
+            f"it adds {100 * (row['radius_s'] - row['parent_s']) / rest:.0f}%)")
 
 
 def _macs_per_query(points: float) -> int:
@@ -230,10 +244,7 @@ def main(argv=None) -> int:
                        f"with the band, all threads), of which radius policy "
                        f"{1e6 * row['radius_s'] / queries:.1f} us: it adds "
                        f"{100 * row['radius_s'] / rest:.0f}% to the rest of the field's time "
-                       f"(its parent-ball neighbour search, whose lists also give the backbone "
-                       f"its patches: {1e6 * row['parent_s'] / queries:.1f} us per query; the "
-                       f"policy without it adds "
-                       f"{100 * (row['radius_s'] - row['parent_s']) / rest:.0f}%)")
+                       + _policy_detail(row, queries, rest))
     if not args.no_poisson:
         child = subprocess.run([sys.executable, __file__, "--poisson-child", "--input", args.input],
                                capture_output=True, text=True, cwd=ROOT)

@@ -46,7 +46,8 @@ from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress
 from .radius import (max_radius, parent_ball, radii_for_queries, reads_parent_ball,
                      require_policy)
-from .settings import UDF_SOURCES, ReconstructSettings
+from .radius_lattice import lattice_radii, lattice_step
+from .settings import UDF_SOURCES, ReconstructSettings, radius_range
 
 # Balls with fewer points use the nearest-point distance (see the module docstring).
 MIN_PATCH_POINTS = 3
@@ -277,14 +278,20 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
         near = _network_nodes(tree, points, origin, indices, nearest, spacing)
         stats["network_queries"] = int(near.sum())
         values = nearest.astype(np.float32)
+        # the radius lattice is anchored where the tiles of one reconstruction share a node
+        lattice_origin = origin if anchor is None else np.asarray(anchor, dtype=np.float64)
+        nodes = indices[near] + np.rint((origin - lattice_origin) / spacing).astype(np.int64)
         values[near] = _network_values(points, tree, origin + indices[near] * spacing,
                                        nearest[near], settings, predictor, progress, cancel,
-                                       stats)
+                                       stats, (nodes, lattice_origin, spacing))
     else:
         values = nearest.astype(np.float32)
     stats["seconds_udf"] = time.perf_counter() - started
-    stats["seconds_radius"] = stats.pop("radius_share", 0.0) * stats["seconds_udf"]
-    stats["seconds_parent_ball"] = stats.pop("parent_share", 0.0) * stats["seconds_udf"]
+    # the radius lattice's time, then the policy's share of the batches' time
+    lattice_seconds = stats.pop("lattice_seconds", 0.0)
+    batches = stats["seconds_udf"] - lattice_seconds
+    stats["seconds_radius"] = lattice_seconds + stats.pop("radius_share", 0.0) * batches
+    stats["seconds_parent_ball"] = stats.pop("parent_share", 0.0) * batches
     grid = UDFGrid.from_band(indices, values, shape, origin, spacing, far_value=band_radius)
     progress(1.0, "field done")
     return BandField(grid, stats)
@@ -305,12 +312,17 @@ def _network_nodes(tree, points: np.ndarray, origin: np.ndarray, indices: np.nda
 
 def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.ndarray,
                     settings: ReconstructSettings, predictor: Optional[Predictor],
-                    progress: ProgressFn, cancel: Optional[CancelFn], stats: dict) -> np.ndarray:
+                    progress: ProgressFn, cancel: Optional[CancelFn], stats: dict,
+                    lattice=None) -> np.ndarray:
     """Backbone UDF (unit frame) at each band query: (M,) float32.
 
     The queries go in batches; on the CPU the batches run on one thread per core
     (:mod:`engine.cpu_threads`), each batch whole: its neighbour search, radius policy and
     backbone. A batch is cut and computed the same way on any number of threads.
+
+    ``lattice``: ``(nodes, lattice_origin, spacing)``, the queries' grid nodes. Where the
+    policy's parent ball spans many spacings its radii come from a coarser lattice
+    (:mod:`engine.radius_lattice`), before the batches.
     """
     if predictor is None:
         device = resolve_device(settings.device)
@@ -323,6 +335,19 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     group = batch if on_gpu else TRIM_GROUP  # a GPU prefers few large calls
     threads = 1 if on_gpu else cpu_threads()
     values = np.empty(len(queries), dtype=np.float32)
+    step = 1
+    if lattice is not None and reads_parent_ball(settings):
+        step = lattice_step(radius_range(settings)[0], lattice[2])
+    stats["lattice_step"] = step
+    lattice_seconds, on_lattice = 0.0, None
+    if step > 1:
+        lattice_seconds = time.perf_counter()
+        on_lattice, found = lattice_radii(
+            lambda positions: radii_for_queries(settings, tree, points, positions,
+                                                parent_ball(settings, tree, positions)),
+            lattice[0], lattice[1], lattice[2], step, threads, cancel)
+        stats["lattice_positions"] = found["lattice_positions"]
+        lattice_seconds = time.perf_counter() - lattice_seconds
 
     def one_batch(start: int) -> dict:
         check_cancel(cancel)
@@ -331,10 +356,13 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
         batch_queries = queries[start:stop]
         # the parent ball's lists also hold the backbone's patch: one k-d query serves both
         parent = None
-        if reads_parent_ball(settings):
+        if reads_parent_ball(settings) and on_lattice is None:
             parent = parent_ball(settings, tree, batch_queries)
         seconds_parent = time.perf_counter() - mark
-        radii = radii_for_queries(settings, tree, points, batch_queries, parent)
+        if on_lattice is None:
+            radii = radii_for_queries(settings, tree, points, batch_queries, parent)
+        else:
+            radii = on_lattice[start:stop].copy()
         seconds_radius = time.perf_counter() - mark
         if parent is None:
             rel, mask, counts = gather_patches(tree, points, batch_queries, radii, MAX_POINTS)
@@ -373,6 +401,7 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     # the radius policy's share of the batches' time (on several threads their times overlap)
     stats["radius_share"] = totals["seconds_radius"] / max(totals["seconds"], 1e-12)
     stats["parent_share"] = totals["seconds_parent"] / max(totals["seconds"], 1e-12)
+    stats["lattice_seconds"] = lattice_seconds
     stats["mean_patch_points"] = totals["points"] / max(len(queries) - totals["sparse"], 1)
     return values
 

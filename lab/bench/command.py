@@ -2,9 +2,10 @@
 
 One row per domain × condition; each row's full result (per-shape metrics, timings, memory) is
 written as JSON to ``--out`` (``<method>_<domain>_<condition>.json``). ``--table`` runs every
-radius mode of ``ours`` instead and prints Table I (rows fixed, curvature, learned, and a
-reference method's row, Open3D Poisson by default; per domain CD-L1 ×10², F1@0.005, F1@0.01, NC),
-one table per condition; a mode the engine has not built yet is reported as 'not available'.
+radius mode of ``ours`` instead and prints Table I (rows fixed, best fixed, curvature, learned,
+and a reference method's row, Open3D Poisson by default; per domain CD-L1 ×10², F1@0.005,
+F1@0.01, NC, double-layered share and area ratio), one table per condition; a mode the engine has
+not built yet is reported as 'not available'.
 
 Examples::
 
@@ -24,6 +25,11 @@ CONDITION_NAMES = ("clean", "sparse", "noisy", "outliers")
 DOMAIN_NAMES = ("cars", "garments", "rooms")  # "all"; "real" (REAL_SHAPES) only by name
 TABLE_MODES = RADIUS_MODES
 REFERENCE_LABEL = "{method} (reference)"
+BEST_FIXED_LABEL = "best fixed"
+# The single ball radius with the lowest held-out UDF error per domain over the learned mode's
+# range (engine/weights/SELECTOR_CARD.md, "best fixed"): Table I's row of a fixed radius tuned
+# to the domain, beside the default 0.018.
+BEST_FIXED_RADII = {"cars": 0.030, "garments": 0.036, "rooms": 0.043}
 
 
 def add_arguments(parser) -> None:
@@ -86,8 +92,9 @@ def _progress(quiet: bool):
     return report
 
 
-def _factory(args, name: str, radius_mode: str):
-    """A picklable callable that builds the method (in this process or in a worker)."""
+def _factory(args, name: str, radius_mode: str, radius=None):
+    """A picklable callable that builds the method (in this process or in a worker); ``radius``
+    (fixed mode) overrides ``--radius``."""
     import functools
 
     from .methods import make_method
@@ -97,8 +104,9 @@ def _factory(args, name: str, radius_mode: str):
         options = {"resolution": args.resolution, "device": args.device}
         if name == "ours":
             options["radius_mode"] = radius_mode
-            if args.radius is not None:
-                options["radius"] = args.radius
+            radius = args.radius if radius is None else radius
+            if radius is not None:
+                options["radius"] = radius
     return functools.partial(make_method, name, **options)
 
 
@@ -201,12 +209,16 @@ def _load_result(args, method: str, domain: str, condition: str):
     return first_shapes(read_json(path), args.count)
 
 
-def _table_rows(args):
-    """Table I's rows: (label, method name, radius mode) for each radius mode of ``ours``, then
-    the reference method's row (``--reference``) unless it is ``none``."""
-    rows = [(mode, "ours", mode) for mode in TABLE_MODES]
+def _table_rows(args, domains):
+    """Table I's rows: (label, method name, radius mode, radius per domain or None) for the
+    default fixed radius, the best fixed radius of each domain (``BEST_FIXED_RADII``), the other
+    radius modes of ``ours``, then the reference method's row (``--reference``) unless it is
+    ``none``."""
+    rows = [(mode, "ours", mode, None) for mode in TABLE_MODES]
+    rows.insert(1, (BEST_FIXED_LABEL, "ours", "fixed",
+                    {d: BEST_FIXED_RADII[d] for d in domains}))
     if args.reference != "none":
-        rows.append((REFERENCE_LABEL.format(method=args.reference), args.reference, None))
+        rows.append((REFERENCE_LABEL.format(method=args.reference), args.reference, None, None))
     return rows
 
 
@@ -219,22 +231,26 @@ def _run_table(args, domains, conditions, progress) -> int:
 
     for condition in conditions:
         cells = {}
-        for label, method_name, mode in _table_rows(args):
+        for label, method_name, mode, radii in _table_rows(args, domains):
+            def name(domain):
+                if method_name != "ours":
+                    return method_name
+                return ours_name(mode, radii[domain] if radii else None)
+
             if args.report:
-                name = ours_name(mode, None) if method_name == "ours" else method_name
-                found = {d: _load_result(args, name, d, condition) for d in domains}
+                found = {d: _load_result(args, name(d), d, condition) for d in domains}
                 missing = [d for d, r in found.items() if r is None]
                 cells[label] = (f"not run ({', '.join(missing)}: no result with {args.count} "
                                 f"shapes in {args.out})" if missing else found)
                 continue
-            factory = _factory(args, method_name, mode)
-            try:
-                method = factory()
-            except MethodUnavailable as error:
-                cells[label] = f"not available ({error})"
-                continue
             cells[label] = {}
             for domain in domains:
+                factory = _factory(args, method_name, mode, radii[domain] if radii else None)
+                try:
+                    method = factory()
+                except MethodUnavailable as error:
+                    cells[label] = f"not available ({error})"
+                    break
                 result = run_benchmark(method, domain, condition, args.count, seed=args.sample_seed,
                                        samples=args.samples, progress=progress, jobs=args.jobs,
                                        method_factory=factory, earlier=_earlier(
@@ -247,9 +263,11 @@ def _run_table(args, domains, conditions, progress) -> int:
 
 
 def format_table_one(cells: dict, domains, condition: str, count: int, samples: int) -> str:
-    """Table I as markdown: rows = radius modes, 4 metric columns per domain. In each metric
-    column the best value as printed (lowest CD, highest F-score and NC) is bold, in every row
-    that reaches it, unless all rows print the same value.
+    """Table I as markdown: rows = radius modes, per domain 4 metric columns, then the
+    double-layered share of the predicted area beside the ground truth's own (its thin parts) and
+    the area ratio prediction / ground truth (in brackets: with the truth's close sheets counted
+    once). In each metric column the best value as printed (lowest CD, highest F-score and NC)
+    is bold, in every row that reaches it, unless all rows print the same value.
 
     Parameters
     ----------
@@ -257,12 +275,13 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
     domains : the domains, in column order
     condition, count, samples : stated in the caption
     """
-    from .harness import _fmt
+    from .harness import _area, _fmt
 
     keys = (("cd_l1_x100", 3), ("f1_0.005", 3), ("f1_0.01", 3), ("nc", 3))
     head = "| radius mode | " + " | ".join(
-        f"{d} CD-L1 ×10² | {d} F1@0.005 | {d} F1@0.01 | {d} NC" for d in domains) + " | s/shape |"
-    rule = "|---|" + "---|" * (4 * len(domains) + 1)
+        f"{d} CD-L1 ×10² | {d} F1@0.005 | {d} F1@0.01 | {d} NC | {d} double % (GT %) "
+        f"| {d} area ratio" for d in domains) + " | s/shape |"
+    rule = "|---|" + "---|" * (6 * len(domains) + 1)
     lines = [f"Table I ({condition}, {count} shapes per domain, {samples} samples per mesh)",
              "", head, rule]
     scored = [cell for cell in cells.values() if not isinstance(cell, str)]
@@ -276,7 +295,7 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
                                          digits)
     for mode, cell in cells.items():
         if isinstance(cell, str):
-            lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (4 * len(domains)))
+            lines.append(f"| {mode} | " + " | ".join([cell] + ["–"] * (6 * len(domains)))
                          + " |")
             continue
         values = []
@@ -291,6 +310,14 @@ def format_table_one(cells: dict, domains, condition: str, count: int, samples: 
                 if key == "cd_l1_x100" and failed:
                     text += f" ({failed} failed)"
                 values.append(text)
+            values += [_double_layer(summary), _area(summary)]
         values.append(_fmt(sum(seconds) / len(seconds), 1))
         lines.append(f"| {mode} | " + " | ".join(values) + " |")
     return "\n".join(lines)
+
+
+def _double_layer(summary: dict) -> str:
+    """``double % (GT %)`` within one spacing; ``–`` for results scored without it."""
+    if summary.get("double_layer") is None:
+        return "–"
+    return f"{100 * summary['double_layer']:.1f} ({100 * summary['gt_double_layer']:.1f})"

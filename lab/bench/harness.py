@@ -482,10 +482,15 @@ def read_json(path: str) -> dict:
 
 
 def write_json(result: dict, out_dir: str) -> str:
-    """Write ``result`` as strict JSON (inf → null) into ``out_dir``; return the file path."""
+    """Write ``result`` as strict JSON (inf → null) into ``out_dir``; return the file path.
+
+    The file is written beside its final name and moved over it, so an interrupted run leaves
+    the previous result (which ``--resume`` extends) whole."""
     os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, result_filename(result))
-    with open(path, "w") as handle:
+    partial = path + ".partial"
+    with open(partial, "w") as handle:
         json.dump(_strict(result), handle, indent=1, allow_nan=False)
         handle.write("\n")
+    os.replace(partial, path)
     return path

@@ -234,9 +234,22 @@ def test_table_one_bolds_the_best_value_of_each_column():
     rows = format_table_one(cells, ["cars"], "clean", 1, SAMPLES).splitlines()[4:]
     # lowest CD; highest F1 (a tie, both bold); F1@0.01 equal everywhere (none bold); highest NC
     # as printed (0.960 twice)
-    assert rows[0] == "| fixed | 0.300 | **0.900** | 1.000 | 0.950 | 1.0 |"
-    assert rows[1] == "| learned | **0.250** | **0.900** | 1.000 | **0.960** | 1.0 |"
-    assert rows[2] == "| poisson (reference) | 0.400 | 0.800 | 1.000 | **0.960** | 1.0 |"
+    # (no layer metrics in these summaries: their two columns read –)
+    assert rows[0] == "| fixed | 0.300 | **0.900** | 1.000 | 0.950 | – | – | 1.0 |"
+    assert rows[1] == "| learned | **0.250** | **0.900** | 1.000 | **0.960** | – | – | 1.0 |"
+    assert rows[2] == "| poisson (reference) | 0.400 | 0.800 | 1.000 | **0.960** | – | – | 1.0 |"
+
+
+def test_table_one_shows_the_double_layer_and_area_columns():
+    from lab.bench.command import format_table_one
+
+    summary = {"cd_l1_x100": 0.3, "f1_0.005": 0.9, "f1_0.01": 1.0, "nc": 0.95, "empty": 0,
+               "seconds": 1.0, "double_layer": 0.012, "gt_double_layer": 0.004,
+               "area_ratio": 0.95, "area_ratio_thin_once": 0.97}
+    lines = format_table_one({"fixed": {"cars": {"summary": summary}}}, ["cars"], "clean", 1,
+                             SAMPLES).splitlines()
+    assert "| cars double % (GT %) | cars area ratio |" in lines[2]
+    assert lines[4] == "| fixed | 0.300 | 0.900 | 1.000 | 0.950 | 1.2 (0.4) | 0.950 (0.970) | 1.0 |"
 
 
 def test_real_dataset_smoke():
@@ -265,6 +278,7 @@ def test_method_gets_points_only():
 def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     from lab.__main__ import main
     from lab.bench import methods
+    from lab.bench.command import BEST_FIXED_RADII
 
     def fake_ours(radius_mode="fixed", **options):
         if radius_mode == "learned":
@@ -273,7 +287,7 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
         def ours(cloud):
             return sphere(2)
 
-        ours.__name__ = "ours" if radius_mode == "fixed" else f"ours-{radius_mode}"
+        ours.__name__ = methods.ours_name(radius_mode, options.get("radius"))
         return ours
 
     dataset = fake_dataset()
@@ -292,7 +306,10 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     assert any(line.startswith("| poisson (reference) | not available (no open3d)")
                for line in lines)
     assert any(line.startswith("| fixed | ") for line in lines)
+    assert any(line.startswith("| best fixed | ") for line in lines)
     assert any(line.startswith("| curvature | ") for line in lines)
+    # the best fixed row runs the domain's own radius
+    assert (tmp_path / f"ours-r{BEST_FIXED_RADII['cars']:g}_cars_clean.json").exists()
     assert any(line.startswith("| learned | not available (no selector weights)") for line in lines)
     assert (tmp_path / "ours-curvature_cars_clean.json").exists()
     # --report assembles the same rows from the JSON files, running nothing
@@ -320,7 +337,7 @@ def test_cli_table_runs_each_radius_mode(monkeypatch, capsys, tmp_path):
     monkeypatch.setattr(harness, "_run_shape", counted_run_shape)
     code = main(["bench", "--table", "--resume", "--domain", "cars", "--condition", "clean",
                  "--count", "2", "--samples", str(SAMPLES), "--out", str(tmp_path), "--quiet"])
-    assert code == 0 and calls == [1, 1]        # fixed and curvature, shape seed 1 each
+    assert code == 0 and calls == [1, 1, 1]  # fixed, best fixed, curvature: shape seed 1 each
     assert "Table I (clean, 2 shapes per domain" in capsys.readouterr().out
     saved = json.loads((tmp_path / "ours_cars_clean.json").read_text())
     assert [row["shape_seed"] for row in saved["shapes"]] == [0, 1]
