@@ -81,7 +81,7 @@ def _policy_detail(row: dict, queries: int, rest: float) -> str:
     """Where the radius policy ran: on a lattice of the grid, or at every query with its
     parent-ball search (whose lists also give the backbone its patches)."""
     if row["lattice_step"] > 1:
-        return (f"(on a lattice of every {row['lattice_step']}th node: "
+        return (f"(on a lattice of one node in {row['lattice_step']} along each axis: "
                 f"{row['lattice_positions']:,} positions, "
                 f"{100 * row['lattice_positions'] / queries:.0f}% of the queries)")
     return (f"(its parent-ball neighbour search, whose lists also give the backbone its "

@@ -10,10 +10,10 @@ on about a fifth as many positions as there are band nodes at step 2 and a twent
 4; where R is under ``2 * LATTICE_NODES_PER_R`` spacings the step is 1 and every node gets its
 own radius.
 
-The selector's radii differ from node to node (by 5-9 % on average between a node's own and
+The selector's radii differ from node to node (by 2-9 % on average between a node's own and
 the blend at step 2 or 4), but the backbone's error is flat near the chosen radius: on the
-first test room (noisy) and garment (clean) at 256, the field's mean error at the nodes within
-2 spacings of the true surface moves by -0.6 % to +0.4 % (``docs/performance.md``).
+first test room (noisy), garment (clean) and car (sparse) at 256, the field's mean error at the
+nodes within 2 spacings of the true surface moves by -0.6 % to +0.4 % (``docs/performance.md``).
 
 The lattice is anchored at a fixed node (a tiled reconstruction's shared anchor), so tiles that
 overlap give their shared nodes the same radii.

@@ -225,7 +225,10 @@ def _table_rows(args, domains):
 def _run_table(args, domains, conditions, progress) -> int:
     """Table I: one row per radius mode of ``ours`` (and the reference method), columns per
     domain. With ``--report`` the table is assembled from the JSON results already in ``--out``
-    (runs done one at a time)."""
+    (runs done one at a time); the best fixed row only where ``--out`` holds some of its
+    results."""
+    import os
+
     from .harness import first_shapes, run_benchmark, write_json
     from .methods import MethodUnavailable, ours_name
 
@@ -238,6 +241,9 @@ def _run_table(args, domains, conditions, progress) -> int:
                 return ours_name(mode, radii[domain] if radii else None)
 
             if args.report:
+                if radii and not any(os.path.exists(os.path.join(
+                        args.out, f"{name(d)}_{d}_{condition}.json")) for d in domains):
+                    continue  # results from before the best fixed row: no such row to report
                 found = {d: _load_result(args, name(d), d, condition) for d in domains}
                 missing = [d for d, r in found.items() if r is None]
                 cells[label] = (f"not run ({', '.join(missing)}: no result with {args.count} "
