@@ -1,0 +1,132 @@
+"""Where a reconstruction's area differs from the truth's: the true surface it misses, by cause.
+
+    python benchmarks/area_breakdown.py DOMAIN CONDITION [--seed 1000000] [--radius-mode fixed]
+        [--resolution 256] [--mesh saved.npz]
+
+Reconstructs one test shape of the benchmark (``lab.bench.dataset``) as ``python -m lab bench``
+does (rooms: both meshes cropped as the benchmark crops them), then samples the true surface and
+splits the share of it that lies farther than 0.5, 1 and 2 grid spacings from the mesh into:
+
+* **rim**: within 3 spacings of the truth's open boundary (a garment's hems, a room's crop edge);
+* **close sheets**: where another sheet of the truth lies within 2.5 spacings: a sample of the
+  truth there, its normal within 6 degrees of this one's either way, more than 0.25 spacing off
+  the tangent plane (a car's panels, a shelf's board, a pocket on a shirt; no bend passes that
+  test). Two sheets that close come out as one from a grid that coarse
+  (``benchmarks/close_sheets.py``);
+* **elsewhere**: holes in the open.
+
+It also prints the share of the mesh farther than one spacing from the truth, and the area
+ratio against the truth with its close sheets counted once (area x (1 - close share / 2)). ``--mesh`` reads
+(or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import numpy as np  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
+from engine.frame import UnitFrame  # noqa: E402
+from engine.geometry import Mesh  # noqa: E402
+from engine.meshing import mesh_ops  # noqa: E402
+from engine.reconstruct import reconstruct  # noqa: E402
+from engine.sampling import sample_surface  # noqa: E402
+from lab.bench import dataset  # noqa: E402
+from lab.bench.harness import DEFAULT_CROP_MAX_DIST  # noqa: E402
+
+RIM = 3.0  # spacings
+CLOSE = 2.5  # spacings: another sheet this near ...
+OFF_PLANE = 0.25  # ... this far off the tangent plane ...
+PARALLEL = 0.995  # ... with its normal within 6 degrees of the sample's, either way
+SAMPLES = 300_000
+
+
+def close_sheet_mask(points, normals, spacing, chunk=10_000):
+    """Samples with another sample within CLOSE spacings lying OFF_PLANE spacings off their
+    tangent plane, its normal parallel to theirs (PARALLEL) either way."""
+    tree = cKDTree(points)
+    out = np.zeros(len(points), bool)
+    for start in range(0, len(points), chunk):
+        p, n = points[start:start + chunk], normals[start:start + chunk]
+        near = tree.query_ball_point(p, CLOSE * spacing, workers=-1)
+        rows = np.repeat(np.arange(len(p)), [len(j) for j in near])
+        cols = np.concatenate([np.asarray(j, np.int64) for j in near])
+        off = np.abs(np.einsum("nc,nc->n", points[cols] - p[rows], n[rows]))
+        parallel = np.abs(np.einsum("nc,nc->n", normals[cols], n[rows])) > PARALLEL
+        hit = rows[parallel & (off > OFF_PLANE * spacing)]
+        out[start + hit] = True
+    return out
+
+
+def rim_distance(vertices, faces, points):
+    """Distance from each point to the mesh's open boundary (its edges sampled 8 times)."""
+    topo = mesh_ops.edge_topology(faces)
+    edges = topo.edges[topo.counts == 1]
+    if not len(edges):
+        return np.full(len(points), np.inf)
+    t = np.linspace(0.0, 1.0, 8)[:, None, None]
+    on_edges = (vertices[edges[:, 0]] * (1 - t) + vertices[edges[:, 1]] * t).reshape(-1, 3)
+    return cKDTree(on_edges).query(points, workers=-1)[0]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("domain", choices=dataset.DOMAINS)
+    parser.add_argument("condition", choices=("clean", "sparse", "noisy"))
+    parser.add_argument("--seed", type=int, default=1_000_000)
+    parser.add_argument("--radius-mode", default="fixed")
+    parser.add_argument("--resolution", type=int, default=256)
+    parser.add_argument("--mesh", help="an .npz to read the reconstruction from, or write it to")
+    args = parser.parse_args()
+
+    truth = dataset.make_shape(args.domain, args.seed)
+    cloud = dataset.make_input(truth, args.domain, args.condition, args.seed)
+    if args.mesh and os.path.exists(args.mesh):
+        saved = np.load(args.mesh)
+        pred = Mesh(saved["v"], saved["f"])
+    else:
+        start = time.perf_counter()
+        pred = reconstruct(np.asarray(cloud.points), {"resolution": args.resolution,
+                                                      "radius_mode": args.radius_mode}).mesh
+        print(f"reconstructed in {time.perf_counter() - start:.0f} s")
+        if args.mesh:
+            np.savez(args.mesh, v=pred.vertices, f=pred.faces)
+    frame = UnitFrame.from_points(np.asarray(truth.vertices, np.float64))
+    if args.domain == "rooms":
+        visible = dataset.make_input(truth, args.domain, "clean", args.seed)
+        truth = dataset.crop_to_input(truth, visible.points, DEFAULT_CROP_MAX_DIST,
+                                      visible.normals)
+        pred = dataset.crop_to_input(pred, np.asarray(cloud.points), DEFAULT_CROP_MAX_DIST)
+    tv, tf = frame.to_unit(np.asarray(truth.vertices, np.float64)), np.asarray(truth.faces)
+    pv, pf = frame.to_unit(np.asarray(pred.vertices, np.float64)), np.asarray(pred.faces)
+    spacing = 1.0 / args.resolution
+    rng = np.random.default_rng(0)
+    points, normals, _ = sample_surface(tv, tf, SAMPLES, rng)
+    on_pred, _, _ = sample_surface(pv, pf, 5 * SAMPLES, rng)
+    t_area = mesh_ops.face_normals(tv, tf)[1].sum()
+    p_area = mesh_ops.face_normals(pv, pf)[1].sum()
+    print(f"{args.domain} {args.condition} seed {args.seed}, {args.radius_mode}, "
+          f"{args.resolution}: area ratio {p_area / t_area:.4f}")
+    gap = cKDTree(on_pred).query(points, workers=-1)[0] / spacing
+    rim = rim_distance(tv, tf, points) < RIM * spacing
+    close = close_sheet_mask(points, normals, spacing)
+    print(f"truth's area with another sheet within {CLOSE} spacings: {100 * close.mean():.2f} %;"
+          f" area ratio with those sheets once: "
+          f"{p_area / (t_area * (1 - close.mean() / 2)):.4f}")
+    print("| true surface farther from the mesh than | all | rim | close sheets | elsewhere |")
+    print("|---|---:|---:|---:|---:|")
+    for limit in (0.5, 1.0, 2.0):
+        miss = gap > limit
+        print(f"| {limit} spacing | {100 * miss.mean():.2f} % | {100 * (miss & rim).mean():.2f} % "
+              f"| {100 * (miss & ~rim & close).mean():.2f} % "
+              f"| {100 * (miss & ~rim & ~close).mean():.2f} % |")
+    off = cKDTree(points).query(on_pred[:SAMPLES], workers=-1)[0] / spacing
+    print(f"mesh farther than 1 spacing from the truth: {100 * (off > 1).mean():.2f} %")
+
+
+if __name__ == "__main__":
+    main()
