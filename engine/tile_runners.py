@@ -15,7 +15,7 @@ through its threads).
 
 import os
 import sys
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Sequence
 
 from .errors import InputError
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
@@ -38,7 +38,8 @@ def available_cores() -> int:
 
 def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: int = 1,
               scheduler: str = "", progress: Optional[ProgressFn] = None,
-              cancel: Optional[CancelFn] = None) -> List:
+              cancel: Optional[CancelFn] = None, costs: Optional[Sequence[float]] = None
+              ) -> List:
     """``[task(*job(i)) for i in range(count)]``, in order, run as asked.
 
     task : a module-level function (it is sent to other processes); in this process it also
@@ -50,11 +51,14 @@ def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: 
     progress : called with the share of tiles done.
     cancel : polled while waiting; on a cancel the workers are stopped and :class:`Cancelled`
         raised.
+    costs : an estimate of each tile's work; workers get the costliest tiles first, so that
+        the last ones to finish are short (the results keep their order).
     """
     progress = progress or no_progress
     workers = workers or available_cores()
+    order = send_order(count, costs)
     if scheduler:
-        return _on_dask(task, count, job, workers, scheduler, progress, cancel)
+        return _on_dask(task, order, job, workers, scheduler, progress, cancel)
     if workers <= 1 or count <= 1 or "bpy" in sys.modules:
         results = []
         for number in range(count):
@@ -63,22 +67,31 @@ def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: 
             part(0.0, f"tile {number + 1} of {count}")
             results.append(task(*job(number), progress=part, cancel=cancel))
         return results
-    return _in_processes(task, count, job, min(workers, count), progress, cancel)
+    return _in_processes(task, order, job, min(workers, count), progress, cancel)
 
 
-def _windowed(submit: Callable, wait_some: Callable, count: int, job, window: int,
+def send_order(count: int, costs: Optional[Sequence[float]] = None) -> List[int]:
+    """The tile numbers, costliest first (ties by number); in number order without costs."""
+    if costs is None:
+        return list(range(count))
+    return sorted(range(count), key=lambda number: (-costs[number], number))
+
+
+def _windowed(submit: Callable, wait_some: Callable, order: List[int], job, window: int,
               progress: ProgressFn, cancel: Optional[CancelFn], where: str) -> List:
-    """Keep ``window`` tiles in flight (``submit(args) -> future``), collect them in order.
+    """Keep ``window`` tiles in flight (``submit(args) -> future``), sent in ``order``;
+    return their results by tile number.
 
     ``wait_some(futures)`` returns the futures finished within :data:`POLL_SECONDS`.
     """
+    count = len(order)
     results = [None] * count
     running = {}
     sent = done = 0
     while done < count:
         check_cancel(cancel)
         while sent < count and len(running) < window:
-            running[submit(job(sent))] = sent
+            running[submit(job(order[sent]))] = order[sent]
             sent += 1
         for future in wait_some(list(running)):
             results[running.pop(future)] = future.result()
@@ -97,7 +110,7 @@ def _one_thread() -> None:
     threadpool_limits(1)
 
 
-def _in_processes(task, count, job, workers, progress, cancel) -> List:
+def _in_processes(task, order, job, workers, progress, cancel) -> List:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -108,7 +121,7 @@ def _in_processes(task, count, job, workers, progress, cancel) -> List:
         return _windowed(lambda args: pool.submit(task, *args),
                          lambda futures: wait(futures, timeout=POLL_SECONDS,
                                               return_when=FIRST_COMPLETED)[0],
-                         count, job, IN_FLIGHT * workers, progress, cancel,
+                         order, job, IN_FLIGHT * workers, progress, cancel,
                          f"on {workers} workers")
     except BrokenProcessPool:
         raise InputError("the worker processes stopped before finishing (out of memory, or a "
@@ -120,7 +133,7 @@ def _in_processes(task, count, job, workers, progress, cancel) -> List:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _on_dask(task, count, job, workers, scheduler, progress, cancel) -> List:
+def _on_dask(task, order, job, workers, scheduler, progress, cancel) -> List:
     try:
         from dask.distributed import Client, LocalCluster, wait
     except ImportError:
@@ -153,7 +166,7 @@ def _on_dask(task, count, job, workers, scheduler, progress, cancel) -> List:
             except TimeoutError:
                 return []
 
-        return _windowed(submit, wait_some, count, job, window, progress, cancel, "on Dask")
+        return _windowed(submit, wait_some, order, job, window, progress, cancel, "on Dask")
     finally:
         client.cancel([future for future in running if not future.done()])
         client.close()

@@ -386,8 +386,10 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         return (points[tile_points(points, tile, reach)], tile, anchor, settings, meshing,
                 udf_source)
 
+    # a tile's work follows the points it reads: workers take the largest tiles first
+    costs = [len(tile_points(points, tile, reach)) for tile in tiles]
     results = run_tiles(mesh_tile, len(tiles), job, settings.workers, settings.scheduler,
-                        sub_progress(progress, 0.0, 0.85), cancel)
+                        sub_progress(progress, 0.0, 0.85), cancel, costs)
     # where a tile kept the other side of an open sheet than its neighbours, make it again
     # keeping the side they kept: the two sides share no vertices along the border
     turn = tiles_to_turn([(v, f) for v, f, _ in results], spacing)
@@ -398,7 +400,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
             return job(int(turn[number]))[:4] + (other, udf_source)
 
         redone = run_tiles(mesh_tile, len(turn), again, settings.workers, settings.scheduler,
-                           sub_progress(progress, 0.85, 0.95), cancel)
+                           sub_progress(progress, 0.85, 0.95), cancel,
+                           [costs[int(number)] for number in turn])
         for number, result in zip(turn, redone):
             results[number] = result
     pieces = []
