@@ -17,13 +17,15 @@ equally good layers, and a tile may keep the other side than its neighbours: suc
 again keeping the side they kept (:func:`tiles_to_turn`), since the two sides share no vertices
 along the border; a piece still facing the other way is turned over. A face both tiles kept
 is kept once, faces left hanging on a weld are dropped and the holes left along the seam (up to
-:data:`SEAM_HOLE_EDGES` edges) are closed.
+:data:`SEAM_HOLE_EDGES` edges) are closed. Each tile's own mesh is already clean, so only the
+seam (the faces with a vertex within :data:`SEAM_CELLS` of their tile's core border, and the
+faces around them) is welded and tidied; the other faces pass through as they are.
 
 Tiles are made one after the other in this process, in worker processes or on a Dask cluster
 (:mod:`.tile_runners`), with the same result.
 
-Memory is bounded by the tile size, not the scene; time grows with the number of tiles that
-hold points.
+A worker's memory is bounded by the tile size, not the scene; the main process holds the
+tiles' faces, the seam and the output. Time grows with the number of tiles that hold points.
 """
 
 import dataclasses
@@ -49,6 +51,9 @@ NORMAL_RINGS = 3
 WELD_CELLS = 0.9
 """Other boundary vertices of neighbouring tiles that are each other's nearest within this
 many cells are welded too."""
+SEAM_CELLS = 8.0
+"""Faces with a vertex this close (cells) to their tile's core border are the seam's: the only
+ones stitching may change (welds, the rings whose normals vote, ears, holes, bow-ties)."""
 
 
 @dataclass(frozen=True)
@@ -96,95 +101,235 @@ def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
     return vertices[used], faces.reshape(-1, 3)
 
 
-def stitch(pieces, spacing: float):
-    """One mesh from the tiles' kept faces: ``pieces`` is a list of ``(vertices, faces)``.
+@dataclass
+class _Seam:
+    """The tiles' kept faces, split into the seam (what stitching may change) and the rest.
+
+    ``vertices``: every tile's vertices, joined (tile after tile, from ``offsets``); ``ids``:
+    the joined index of each seam vertex (ascending); ``faces``: the seam's faces over the seam
+    vertices: the zone faces (``zone``: a vertex within :data:`SEAM_CELLS` of their tile's
+    core border) and the faces sharing a vertex with them, so that every edge of a zone face
+    has all of its faces here; ``face_piece``: the piece of each seam face (the pieces are the
+    tiles' own vertex-connected components, numbered across the tiles); ``rest``: per tile,
+    its other faces (joined numbering) and their pieces; ``piece_tile``, ``piece_area``,
+    ``piece_faces``: per piece; ``a``, ``b``: the seam vertices to weld
+    (:func:`_pairs_across`).
+    """
+
+    vertices: np.ndarray
+    offsets: np.ndarray
+    ids: np.ndarray
+    faces: np.ndarray
+    zone: np.ndarray
+    face_piece: np.ndarray
+    rest: list
+    piece_tile: np.ndarray
+    piece_area: np.ndarray
+    piece_faces: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+
+
+def _seam(pieces, tiles, spacing: float) -> _Seam:
+    """Split the tiles' kept faces ``pieces`` (``(vertices, faces)`` per tile of ``tiles``)."""
+    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
+
+    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
+    vertices = np.concatenate([np.asarray(v, np.float64).reshape(-1, 3) for v, _ in pieces]
+                              + [np.zeros((0, 3))])
+    near = np.zeros(len(vertices), bool)
+    seam_faces, seam_zone, seam_piece, rest = [], [], [], []
+    piece_tile, piece_area, piece_faces = [], [], []
+    first = 0
+    for number, ((v, f), tile) in enumerate(zip(pieces, tiles)):
+        v = np.asarray(v, np.float64).reshape(-1, 3)
+        f = np.asarray(f, np.int64).reshape(-1, 3)
+        count, label = vertex_components(len(v), f) if len(f) else (0, np.zeros(0, np.int64))
+        piece_tile.append(np.full(count, number, np.int64))
+        piece_area.append(np.bincount(label, weights=face_normals(v, f)[1], minlength=count))
+        piece_faces.append(np.bincount(label, minlength=count))
+        label = label + first
+        first += count
+        margin = np.minimum(v - tile.low, tile.high - v).min(axis=1)
+        close = margin < SEAM_CELLS * spacing
+        near[offsets[number]:offsets[number + 1]] = close
+        zone = close[f].any(axis=1)
+        touched = np.zeros(len(v), bool)
+        touched[f[zone]] = True
+        seam = touched[f].any(axis=1)
+        joined = f + offsets[number]
+        seam_faces.append(joined[seam])
+        seam_zone.append(zone[seam])
+        seam_piece.append(label[seam])
+        rest.append((joined[~seam], label[~seam]))
+    ids, local = np.unique(np.concatenate(seam_faces + [np.zeros((0, 3), np.int64)]),
+                           return_inverse=True)
+    faces = local.reshape(-1, 3)
+    empty = np.zeros(0, np.int64)
+    a = b = empty
+    if len(faces):
+        topo = edge_topology(faces)
+        rim = np.unique(topo.edges[topo.counts == 1])
+        rim = rim[near[ids[rim]]]  # the zone's open edges are open in the whole mesh too
+        tile_of = np.searchsorted(offsets, ids[rim], side="right") - 1
+        i, j = _pairs_across(vertices[ids[rim]], tile_of, spacing)
+        a, b = rim[i], rim[j]
+    return _Seam(vertices, offsets, ids, faces, np.concatenate(seam_zone + [np.zeros(0, bool)]),
+                 np.concatenate(seam_piece + [empty]), rest,
+                 np.concatenate(piece_tile + [empty]), np.concatenate(piece_area + [np.zeros(0)]),
+                 np.concatenate(piece_faces + [empty]), a, b)
+
+
+def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
+    """One mesh from the tiles' kept faces: ``pieces`` is a list of ``(vertices, faces)``, one
+    per tile of ``tiles``.
+
+    Only the seam (:class:`_Seam`) is welded and tidied: each tile's own mesh is already clean,
+    so the faces away from its core's border pass through unchanged, and memory beyond the
+    output follows the seam, not the scene. ``min_component_faces``: drop pieces (joined
+    across the tiles) with fewer faces.
 
     Returns
     -------
     vertices : (n, 3) float64; faces : (m, 3) int64
-    stats : dict with ``welded`` vertices, ``flipped`` pieces, ``ears_dropped`` faces and
-        ``holes_closed``
+    stats : dict with ``welded`` vertices, ``flipped`` pieces, ``ears_dropped`` faces,
+        ``holes_closed``, and the clean-up's ``cleanup_degenerate``, ``cleanup_split_vertices``,
+        ``cleanup_specks`` and ``cleanup_small_pieces``
     """
+    from .meshing.cleanup import find_specks
     from .meshing.layers import close_pinholes
-    from .meshing.mesh_ops import vertex_components
+    from .meshing.mesh_ops import face_normals, split_nonmanifold_vertices, vertex_components
 
-    vertices, faces, _, a, b = _joined(pieces, spacing)
-    stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0}
-    if len(a):
-        count, face_piece = vertex_components(len(vertices), faces)
-        faces, stats["flipped"] = _agree_orientation(vertices, faces, face_piece, count, a, b)
-        vertices, merged = _weld(vertices, a, b)
+    seam = _seam(pieces, tiles, spacing)
+    stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0,
+             "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
+             "cleanup_small_pieces": 0}
+    faces, zone, piece = seam.faces, seam.zone, seam.face_piece
+    local = seam.vertices[seam.ids]
+    flip = np.zeros(len(seam.piece_tile), bool)
+    if not len(faces):  # no surface near a border: nothing to stitch
+        return _assemble(seam, local, faces, flip, flip) + (stats,)
+    if len(seam.a):
+        flip = _piece_flips(local, faces, piece, len(flip), seam.a, seam.b)
+        stats["flipped"] = int(flip.sum())
+        local, merged = _weld(local, seam.a, seam.b)
+        stats["welded"] = int(len(local) - len(np.unique(merged)))
         faces = merged[faces]
-        faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
-                      & (faces[:, 0] != faces[:, 2])]
-        # a face both tiles kept once its corners are welded: keep it once
-        faces = faces[np.sort(np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1])]
-        stats["welded"] = int(len(vertices) - len(np.unique(merged)))
-        faces, stats["ears_dropped"] = _drop_ears(faces)
-        faces, stats["holes_closed"] = close_pinholes(faces, SEAM_HOLE_EDGES)
-    return vertices, faces, stats
+    faces = np.where(flip[piece][:, None], faces[:, ::-1], faces)
+    keep = ((faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+            & (faces[:, 0] != faces[:, 2]))
+    faces, zone, piece = faces[keep], zone[keep], piece[keep]
+    # a face both tiles kept once its corners are welded: keep it once
+    keep = np.sort(np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1])
+    faces, zone, piece = faces[keep], zone[keep], piece[keep]
+    keep, stats["ears_dropped"] = _ears_kept(faces, zone)
+    faces, zone, piece = faces[keep], zone[keep], piece[keep]
+    # the seam's context faces may border faces that are not here: no hole through them
+    in_zone = np.zeros(len(local), bool)
+    in_zone[faces[zone]] = True
+    before = len(faces)
+    faces, stats["holes_closed"] = close_pinholes(faces, SEAM_HOLE_EDGES, keep_open=~in_zone)
+    added = len(faces) - before
+    zone = np.concatenate([zone, np.ones(added, bool)])
+    vertex_piece = np.zeros(len(local), np.int64)
+    vertex_piece[faces[:before].reshape(-1)] = np.repeat(piece, 3)
+    piece = np.concatenate([piece, vertex_piece[faces[before:, 0]]])  # a patch joins its rim
+    area = face_normals(local, faces)[1]
+    degenerate = zone & (area < 1e-8 * spacing ** 2)
+    stats["cleanup_degenerate"] = int(degenerate.sum())
+    faces, zone, piece = faces[~degenerate], zone[~degenerate], piece[~degenerate]
+    in_zone[:] = False
+    in_zone[faces[zone]] = True
+    before = len(local)
+    local, faces = split_nonmanifold_vertices(local, faces, only=in_zone, compact=False)
+    stats["cleanup_split_vertices"] = int(len(np.unique(faces[faces >= before])))
+    # specks the stitching left (a sliver that found nothing to weld to): only pieces with no
+    # context face lie wholly in the seam, so only they can be judged here
+    count, label = vertex_components(len(local), faces)
+    whole = np.bincount(label, weights=~zone, minlength=count) == 0
+    speck = find_specks(local, faces, spacing) & whole[label]
+    stats["cleanup_specks"] = int(len(np.unique(label[speck])))
+    faces, zone, piece = faces[~speck], zone[~speck], piece[~speck]
+    small = np.zeros(len(flip), bool)
+    if min_component_faces > 0:
+        small = _small_pieces(seam, faces, piece, min_component_faces)
+        stats["cleanup_small_pieces"] = int(small.sum())
+    return _assemble(seam, local, faces[~small[piece]], flip, small) + (stats,)
 
 
-def tiles_to_turn(pieces, spacing: float) -> np.ndarray:
-    """Indices of the tiles whose kept layer faces against their neighbours' across the
-    borders (by the votes of :func:`_agree_orientation`): the smaller side, by area."""
-    from .meshing.mesh_ops import face_normals, vertex_components
-
-    vertices, faces, tile_of, a, b = _joined(pieces, spacing)
-    if not len(a):
-        return np.zeros(0, np.int64)
-    count, face_piece = vertex_components(len(vertices), faces)
-    turned = _agree_orientation(vertices, faces, face_piece, count, a, b)[0]
-    flipped = turned[:, 0] != faces[:, 0]
-    area = face_normals(vertices, faces)[1]
-    if area[flipped].sum() > area[~flipped].sum():
-        flipped = ~flipped  # an open sheet's orientation is free: turn the smaller side
-    face_tile = tile_of[faces[:, 0]]
-    share = np.bincount(face_tile, weights=area * flipped, minlength=len(pieces))
-    total = np.bincount(face_tile, weights=area, minlength=len(pieces))
-    return np.flatnonzero(share > 0.5 * np.maximum(total, 1e-300))
-
-
-def _joined(pieces, spacing: float):
-    """The pieces as one unwelded mesh, and the boundary vertices to weld across tiles.
-
-    Returns ``vertices``, ``faces``, ``tile_of`` (the tile of each vertex) and the pairs
-    ``(a, b)`` of vertex indices to weld (see :func:`_pairs_across`).
-    """
+def _ears_kept(faces: np.ndarray, may_drop: np.ndarray, passes: int = 3):
+    """The faces left when those hanging on a weld are dropped (``may_drop`` only): a face
+    with a third face on one of its edges and nothing on the other two (one tile's face over
+    the other tile's, sharing an edge). Returns the kept mask and how many were dropped."""
     from .meshing.mesh_ops import edge_topology
 
-    vertices = np.concatenate([v for v, _ in pieces] + [np.zeros((0, 3))])
-    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
-    faces = np.concatenate([f + o for (_, f), o in zip(pieces, offsets)]
-                           + [np.zeros((0, 3), np.int64)]).astype(np.int64)
-    tile_of = np.repeat(np.arange(len(pieces)), np.diff(offsets))
-    if not len(faces):
-        empty = np.zeros(0, np.int64)
-        return vertices, faces, tile_of, empty, empty
-    topo = edge_topology(faces)
-    rim = np.unique(topo.edges[topo.counts == 1])
-    a, b = _pairs_across(vertices[rim], tile_of[rim], spacing)
-    return vertices, faces, tile_of, rim[a], rim[b]
-
-
-def _drop_ears(faces: np.ndarray, passes: int = 3):
-    """Drop the faces left hanging on a weld: a face with a third face on one of its edges and
-    nothing on the other two (one tile's face over the other tile's, sharing an edge).
-    Returns the faces and how many were dropped."""
-    from .meshing.mesh_ops import edge_topology
-
-    dropped = 0
+    keep = np.ones(len(faces), bool)
     for _ in range(passes):
-        if not len(faces):
+        index = np.flatnonzero(keep)
+        if not len(index):
             break
-        topo = edge_topology(faces)
+        topo = edge_topology(faces[index])
         uses = topo.counts[topo.face_edges]
-        ear = ((uses == 1).sum(axis=1) == 2) & ((uses > 2).sum(axis=1) == 1)
+        ear = ((uses == 1).sum(axis=1) == 2) & ((uses > 2).sum(axis=1) == 1) & may_drop[index]
         if not ear.any():
             break
-        faces = faces[~ear]
-        dropped += int(ear.sum())
-    return faces, dropped
+        keep[index[ear]] = False
+    return keep, int((~keep).sum())
+
+
+def _small_pieces(seam: _Seam, faces: np.ndarray, piece: np.ndarray, min_faces: int):
+    """Per piece: True where the pieces it joins across the seams (by a shared seam vertex)
+    have fewer than ``min_faces`` faces in all."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    count = len(seam.piece_tile)
+    nodes = count + int(faces.max()) + 1 if len(faces) else count
+    rows = np.repeat(piece, 3)
+    cols = count + faces.reshape(-1)
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(nodes, nodes))
+    _, label = connected_components(graph, directed=False)
+    size = np.bincount(label[:count], weights=seam.piece_faces, minlength=nodes)
+    return size[label[:count]] < min_faces
+
+
+def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarray,
+              dropped: np.ndarray):
+    """The whole mesh: every tile's faces away from the seam (turned over where their piece
+    was, left out where it was ``dropped``) and the stitched seam ``faces`` over its vertices
+    ``local`` (the seam's vertices, welded, then any copies); unused vertices removed."""
+    vertices = seam.vertices
+    n, s = len(vertices), len(seam.ids)
+    vertices[seam.ids] = local[:s]
+    lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
+    parts = []
+    for rest, piece in seam.rest:
+        keep = ~dropped[piece]
+        rest, piece = rest[keep], piece[keep]
+        parts.append(np.where(flip[piece][:, None], rest[:, ::-1], rest))
+    parts.append(lookup[faces])
+    faces = np.concatenate(parts)
+    vertices = np.concatenate([vertices, local[s:]])
+    used = np.zeros(len(vertices), bool)
+    used[faces.reshape(-1)] = True
+    remap = np.cumsum(used) - 1
+    return vertices[used], remap[faces]
+
+
+def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
+    """Indices of the tiles whose kept layer faces against their neighbours' across the
+    borders (by the votes of :func:`_piece_flips`): the smaller side, by area."""
+    seam = _seam(pieces, tiles, spacing)
+    if not len(seam.a):
+        return np.zeros(0, np.int64)
+    flip = _piece_flips(seam.vertices[seam.ids], seam.faces, seam.face_piece,
+                        len(seam.piece_tile), seam.a, seam.b)
+    area = seam.piece_area
+    if area[flip].sum() > area[~flip].sum():
+        flip = ~flip  # an open sheet's orientation is free: turn the smaller side
+    share = np.bincount(seam.piece_tile, weights=area * flip, minlength=len(pieces))
+    total = np.bincount(seam.piece_tile, weights=area, minlength=len(pieces))
+    return np.flatnonzero(share > 0.5 * np.maximum(total, 1e-300))
 
 
 def _pairs_across(points: np.ndarray, tile_of: np.ndarray, spacing: float):
@@ -253,13 +398,13 @@ def _mutual_nearest_across(points: np.ndarray, tile_of: np.ndarray, reach: float
     return i[keep], j[keep]
 
 
-def _agree_orientation(vertices, faces, face_piece, count, a, b):
-    """Turn over the pieces whose faces at welded pairs face against their neighbours'.
+def _piece_flips(vertices, faces, face_piece, count, a, b) -> np.ndarray:
+    """Which pieces to turn over so that their faces at welded pairs face as their
+    neighbours' do: (count,) bool.
 
     Each welded pair votes (the normals of the few rings around its two vertices agree or not)
     between the two pieces it joins; a spanning forest over the pieces, strongest votes first,
     fixes each piece's parity. ``face_piece`` (m,) numbers the pieces (``count`` of them) per face.
-    Returns the faces (some rows reversed) and how many pieces were turned.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import minimum_spanning_tree
@@ -283,7 +428,7 @@ def _agree_orientation(vertices, faces, face_piece, count, a, b):
     between = pa != pb
     pa, pb, agree = pa[between], pb[between], agree[between]
     if not len(pa):
-        return faces, 0
+        return np.zeros(count, bool)
     lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
     key = lo * count + hi
     keys, inverse = np.unique(key, return_inverse=True)
@@ -313,10 +458,7 @@ def _agree_orientation(vertices, faces, face_piece, count, a, b):
                     seen[other] = True
                     flip[other] = flip[node] ^ (s < 0)
                     stack.append(other)
-    turned = flip[face_piece]
-    faces = faces.copy()
-    faces[turned] = faces[turned][:, ::-1]
-    return faces, int(flip.sum())
+    return flip
 
 
 def tile_size(detail, settings) -> int:
@@ -370,7 +512,6 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
         ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
-    from .meshing.cleanup import clean_mesh
     from .tile_runners import available_cores
 
     from .tile_runners import run_tiles
@@ -392,7 +533,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                         sub_progress(progress, 0.0, 0.85), cancel, costs)
     # where a tile kept the other side of an open sheet than its neighbours, make it again
     # keeping the side they kept: the two sides share no vertices along the border
-    turn = tiles_to_turn([(v, f) for v, f, _ in results], spacing)
+    turn = tiles_to_turn([(v, f) for v, f, _ in results], tiles, spacing)
     if len(turn):
         other = dataclasses.replace(meshing, other_side=not meshing.other_side)
 
@@ -418,14 +559,13 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         patch_points += band["mean_patch_points"] * seen
         device = band["device"]
     progress(0.95, f"stitching {len(tiles)} tiles")
-    vertices, faces, stitched = stitch(pieces, spacing)
-    vertices, faces, counts = clean_mesh(vertices, faces, spacing, meshing.min_component_faces)
+    vertices, faces, stitched = stitch(pieces, tiles, spacing, meshing.min_component_faces)
     seen = sums["network_queries"] - sums["sparse_balls"]
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
                    "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
                    "udf_source": udf_source}
-    mesh_stats = {**stitched, "tiles_turned": int(len(turn)), **{f"cleanup_{k}": v for k, v in counts.items()},
+    mesh_stats = {**stitched, "tiles_turned": int(len(turn)),
                   "iso": float(np.median(isos)) if isos else 0.0}
     progress(1.0, "tiles stitched")
     return vertices, faces.astype(np.int64), field_stats, mesh_stats

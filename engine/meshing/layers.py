@@ -743,12 +743,14 @@ def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndar
 PINHOLE_EDGES = 8  # boundary loops this short are holes left by the choice, not rims
 
 
-def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES):
+def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES, keep_open=None):
     """Close the small holes the layer choice leaves (a face or a few, inside a sheet or notched
     into a rim) with a fan of faces, wound like their neighbours.
 
     Only simple loops (each vertex on one incoming and one outgoing boundary edge) of at most
-    ``max_edges`` edges are closed. Returns (faces, holes closed).
+    ``max_edges`` edges are closed, and none through a vertex of ``keep_open`` ((n,) bool,
+    optional: where the faces given are not all the faces there are). Returns (faces, holes
+    closed).
     """
     from scipy import sparse
     from scipy.sparse.csgraph import connected_components
@@ -770,6 +772,8 @@ def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES):
     size = np.bincount(loop)
     simple = np.ones(len(size), bool)
     bad = (out_degree[edges[:, 0]] != 1) | (in_degree[edges[:, 0]] != 1)
+    if keep_open is not None:
+        bad |= keep_open[edges[:, 0]]
     simple[loop[bad]] = False
     small = np.nonzero(simple & (size <= max_edges) & (size >= 3))[0]
     if len(small) == 0:

@@ -158,11 +158,14 @@ def vertex_fans(n: int, faces: np.ndarray, topo: EdgeTopology = None):
     return labels, fans
 
 
-def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray):
+def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray, only=None,
+                               compact: bool = True):
     """Give every fan of a non-manifold vertex (a bow-tie) its own copy of the vertex.
 
     Vertices on an edge shared by more than two faces (a junction where a shelf meets a wall)
-    stay joined: the junction is part of the surface.
+    stay joined: the junction is part of the surface. ``only`` (n,) bool: split these vertices
+    alone (the others' fans may be incomplete). With ``compact`` False the vertices keep their
+    indices, the copies come after them and unused vertices stay.
 
     Returns new (vertices, faces); manifold meshes come back unchanged (as copies).
     """
@@ -170,6 +173,8 @@ def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray):
     labels, fans = vertex_fans(len(vertices), faces, topo)
     junction = np.zeros(len(vertices), bool)
     junction[topo.edges[topo.counts > 2].reshape(-1)] = True
+    if only is not None:
+        junction |= ~only  # left joined, like a junction
     fans[junction] = 1
     if not np.any(fans > 1):
         return vertices.copy(), faces.copy()
@@ -189,7 +194,8 @@ def split_nonmanifold_vertices(vertices: np.ndarray, faces: np.ndarray):
     lookup = np.empty(labels.max() + 1, dtype=np.int64)
     lookup[fan_ids] = new_index
     out_faces = lookup[labels]
-    out_vertices, out_faces, _ = remove_unreferenced(out_vertices, out_faces)
+    if compact:
+        out_vertices, out_faces, _ = remove_unreferenced(out_vertices, out_faces)
     return out_vertices, out_faces
 
 

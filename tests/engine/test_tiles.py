@@ -181,16 +181,57 @@ def _grid_sheet(x0, x1, y1, step):
 
 
 def test_a_tile_that_kept_the_other_side_is_found_and_the_seam_welds():
-    from engine.tiles import stitch, tiles_to_turn
+    from engine.tiles import Tile, stitch, tiles_to_turn
 
     step = 1.0 / 64
     left = _grid_sheet(-1.0, 0.0, 1.0, step)
     right = _grid_sheet(0.0, 0.5, 1.0, step)  # the smaller piece ...
     right = (right[0], right[1][:, ::-1])       # ... faces the other way
-    assert list(tiles_to_turn([left, right], step)) == [1]
-    vertices, faces, stats = stitch([left, right], step)
+    inf = np.full(3, np.inf)
+    tiles = [Tile((0, 0, 0), -inf, np.array([0.0, np.inf, np.inf])),
+             Tile((1, 0, 0), np.array([0.0, -np.inf, -np.inf]), inf)]
+    assert list(tiles_to_turn([left, right], tiles, step)) == [1]
+    vertices, faces, stats = stitch([left, right], tiles, step)
     assert stats["flipped"] == 1
     topo = edge_topology(faces)
     middle = vertices[topo.edges[topo.counts == 1]].mean(axis=1)
     assert not np.any(np.abs(middle[:, 0]) < 0.5 * step)  # no boundary left along x = 0
     assert (topo.counts <= 2).all()
+
+
+def _punch(sheet, x_from, step):
+    """The sheet without a 3 x 3 block of its squares (a hole of 12 edges) starting at x_from,
+    its vertices lifted off the plane a little (a fan over a hole with collinear sides would
+    have faces of no area)."""
+    vertices, faces = sheet
+    vertices = vertices.copy()
+    vertices[:, 2] = 0.1 * step * np.sin(vertices[:, 0] * 517.0 + vertices[:, 1] * 311.0)
+    centre = vertices[faces].mean(axis=1)
+    hole = ((centre[:, 0] > x_from) & (centre[:, 0] < x_from + 3 * step)
+            & (centre[:, 1] > 0.5) & (centre[:, 1] < 0.5 + 3 * step))
+    return vertices, faces[~hole]
+
+
+def test_only_the_seam_is_stitched():
+    """A hole at the border is closed, one deep inside a tile is left as its mesher made it,
+    and the faces away from the border come out as they went in."""
+    from engine.tiles import SEAM_CELLS, Tile, stitch
+
+    step = 1.0 / 64
+    left = _punch(_grid_sheet(-1.0, 0.0, 1.0, step), -0.5, step)             # deep inside
+    right = _punch(_grid_sheet(0.0, 1.0, 1.0, step), 2.0 * step + 1e-9, step)  # at the border
+    inf = np.full(3, np.inf)
+    tiles = [Tile((0, 0, 0), -inf, np.array([0.0, np.inf, np.inf])),
+             Tile((1, 0, 0), np.array([0.0, -np.inf, -np.inf]), inf)]
+    vertices, faces, stats = stitch([left, right], tiles, step)
+    assert stats["holes_closed"] == 1
+    topo = edge_topology(faces)
+    rim = vertices[topo.edges[topo.counts == 1]].mean(axis=1)
+    inner = (np.abs(rim[:, 0]) < 1 - step / 4) & (rim[:, 1] > step / 4) & (rim[:, 1] < 1 - step / 4)
+    assert inner.sum() == 12
+    assert np.all(np.abs(rim[inner, 0] + 0.5) < 4 * step)  # the hole deep inside stays open
+    far = faces[np.abs(vertices[faces].mean(axis=1)[:, 0]) > (SEAM_CELLS + 1) * step]
+    before = np.concatenate([v[f] for v, f in (left, right)])
+    after = vertices[far]
+    key = lambda corners: set(map(tuple, np.round(corners.reshape(len(corners), -1), 12)))
+    assert key(after) <= key(before)
