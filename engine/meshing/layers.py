@@ -775,6 +775,7 @@ def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES, keep_open=
     if keep_open is not None:
         bad |= keep_open[edges[:, 0]]
     simple[loop[bad]] = False
+    simple &= ~_whole_rim(faces, np.nonzero(open_side)[0] // 3, loop, size)
     small = np.nonzero(simple & (size <= max_edges) & (size >= 3))[0]
     if len(small) == 0:
         return faces, 0
@@ -798,6 +799,21 @@ def close_pinholes(faces: np.ndarray, max_edges: int = PINHOLE_EDGES, keep_open=
         return faces, 0
     return np.concatenate([faces, np.asarray(added, np.int64)]), int(len(small))
 
+
+def _whole_rim(faces: np.ndarray, edge_face: np.ndarray, loop: np.ndarray, size: np.ndarray):
+    """True for the loops that are all the boundary a small piece has: its outer rim, not a hole
+    in it. A fan across it would lay a second sheet on the piece (a piece of at most
+    PIECE_PER_EDGE faces per rim edge; a closed shell with a pinhole has far more)."""
+    _, piece = mesh_ops.vertex_components(int(faces.max()) + 1, faces)
+    loop_piece = np.full(len(size), -1, np.int64)
+    loop_piece[loop] = piece[edge_face]
+    loops_per_piece = np.bincount(loop_piece[size > 0], minlength=piece.max() + 1)
+    piece_faces = np.bincount(piece)
+    return ((loops_per_piece[loop_piece] == 1)
+            & (piece_faces[loop_piece] <= PIECE_PER_EDGE * size))
+
+
+PIECE_PER_EDGE = 4
 
 LIP_COS = -0.3  # a boundary face turned this far back against its kept neighbour is a lip
 LIP_PASSES = 4

@@ -379,3 +379,25 @@ def test_layers_stalled_across_a_low_slab_are_twins_a_thin_part_is_not(profile, 
         assert np.abs(z).max() < 1e-9
     else:  # both sheets, where they were
         assert np.array_equal(moved, verts)
+
+
+def test_pinholes_closed_a_small_piece_rim_left_open():
+    """A hole in a sheet is closed; the rim of a piece of a few faces is not (a fan across it
+    would lay a second sheet on the piece)."""
+    from engine.meshing.layers import close_pinholes
+
+    n = 6  # a 6 x 6 grid of quads with its middle vertex's fan taken out: a 6-edge hole
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    quads = [(idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1])
+             for i in range(n) for j in range(n)]
+    sheet = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    sheet = sheet[~(sheet == idx[3, 3]).any(axis=1)]
+    closed, count = close_pinholes(sheet)
+    assert count == 1 and mo.boundary_loops(closed) == 1
+    assert mo.orientation_consistent(closed)
+
+    piece = np.array([(0, 1, 2), (0, 2, 3), (0, 3, 4)]) + 100  # a fan of 3 faces, 5-edge rim
+    both = np.concatenate([sheet, piece])
+    closed, count = close_pinholes(both)
+    assert count == 1 and len(closed) == len(sheet) + 4 + len(piece)
+    assert mo.boundary_loops(closed) == 2
