@@ -8,8 +8,9 @@ as ``rel = (p - q) / R`` (the patch contract of :mod:`engine.patches`). Features
   keeps the radial spread of the whole ball while bounding cost) -> a 256-d code;
 - log(1 + N) with N the points in the parent ball (saturating at PARENT_POINTS);
 - a 6-bin radial density histogram: the share of the ball's points in each shell of width R/6;
-- the patch's roughness (:mod:`engine.patch_roughness`: thickness across its plane and the
-  residual of a fitted quadric), which tells noisy patches from clean ones, over the strided
+- the patch's roughness (:mod:`engine.patch_roughness`: thickness across its plane, the
+  residual of a fitted quadric and how well its heights split into two sheets), which tells
+  noisy patches from clean ones and a second sheet from noise, over the strided
   patch and over the NEAR_POINTS nearest points alone: noise roughens both, a second sheet or
   a crease a few point spacings away only the first.
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from .backbone import ZEROS, max_over_points, relu_
 from .cpu_threads import run_in_threads
-from .patch_roughness import patch_roughness
+from .patch_roughness import ROUGHNESS_FEATURES, patch_roughness
 from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
                       patches_from_neighbours)
 from .weights_file import read_weights
@@ -43,7 +44,8 @@ PARENT_POINTS = 64
 STRIDE = 4
 HISTOGRAM_BINS = 6
 NEAR_POINTS = 16
-EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2 + 2  # log count, histogram, roughness (strided, near)
+EXTRA_FEATURES = 1 + HISTOGRAM_BINS + 2 * ROUGHNESS_FEATURES  # log count, histogram, roughness
+# (strided, near)
 # Queries per numpy forward pass: their per-point activations (256 x about 10 points x 64
 # float32) stay in a core's cache between the layers.
 BATCH = 256
@@ -70,7 +72,7 @@ def parent_features(tree, points: np.ndarray, queries: np.ndarray, parent_radius
     rel : (Q, PARENT_POINTS // STRIDE, 3) float32, strided parent-patch points / R
     mask : (Q, PARENT_POINTS // STRIDE) bool
     extra : (Q, EXTRA_FEATURES) float32, [log(1 + N) / log(1 + PARENT_POINTS), histogram,
-        roughness (thickness, quadric residual) of the strided patch and of the NEAR_POINTS
+        roughness (thickness, quadric residual, split) of the strided patch and of the NEAR_POINTS
         nearest], as measured (standardised in the network)
     """
     if neighbours is None:  # chunk by chunk: the lists take 2 kB per query

@@ -52,3 +52,23 @@ def test_too_few_points_read_zero_and_padding_is_ignored():
     queries = sheet[:20]
     np.testing.assert_allclose(_features(sheet, queries, 128), _features(sheet, queries, 300),
                                atol=1e-6)            # ball holds < 128: same with more padding
+
+
+def test_the_split_tells_two_close_sheets_from_noise():
+    """Two flat sheets a tenth of R apart read a split near 1; one sheet with noise of the same
+    rms height reads about 2/pi, as Gaussian heights do; a plane reads 0."""
+    rng = np.random.default_rng(2)
+    gap = 0.1 * R
+    def flat(n, seed):
+        return _sheet(n, lambda uv: 0.0 * uv[:, 0], seed)
+
+    lower = flat(2000, 3)
+    two = np.concatenate([lower, flat(2000, 4) + (0.0, 0.0, gap)])
+    noisy = flat(4000, 5)
+    noisy[:, 2] += rng.normal(0, gap / 2, len(noisy))
+    queries = rng.uniform(-0.05, 0.05, (40, 3)) * (1.0, 1.0, 0.1)
+    split = {name: _features(points, queries)[:, 2] for name, points in
+             (("two", two), ("noisy", noisy), ("plane", lower))}
+    assert np.median(split["two"]) > 0.95
+    assert np.median(split["noisy"]) == pytest.approx(2 / np.pi, abs=0.06)
+    np.testing.assert_allclose(split["plane"], 0.0, atol=1e-3)

@@ -159,7 +159,8 @@ def test_roughness_features_tell_a_noisy_patch_from_a_clean_curved_one():
 
 
 def test_training_learns_a_radius_from_the_noise_features():
-    """Two kinds of patch, told apart only by the quadric residual (a small number, as measured):
+    """Two kinds of patch, told apart only by one extra feature, of a small spread (as the
+    quadric residual's, measured):
     clean ones whose error is lowest at 0.016, noisy ones whose error falls all the way to 0.024.
     The trainer (standardised features, head first) must give each kind its own radius."""
     import argparse
