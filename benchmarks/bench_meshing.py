@@ -4,7 +4,8 @@
 
 cpu s is the process time of the extraction (both threads of the field queries; under load it
 is steadier than the wall times); opt it the iterations run (stage 2 stops early once converged),
-ms/it the wall time per iteration.
+ms/it the wall time per iteration, passes the optimisation's passes: ``compiled`` (numba), or
+``numpy`` (without numba, or with ``UDF_RECON_KERNELS=numpy``), or ``torch``.
 
 Fields: sphere of radius 0.5 and flat disk of radius 0.5 (z = 0, midway between node layers)
 in [-1, 1]^3, dense grids (the grid interpolation path, as with a network's output). Peak memory
@@ -40,7 +41,7 @@ def main():
     header = (f"{'shape':7s} {'res':>4s} {'cover F':>9s} {'out F':>8s} {'grid s':>7s} "
               f"{'MC s':>6s} {'field s':>7s} {'opt s':>7s} {'layer s':>7s} {'clean s':>7s} "
               f"{'total s':>8s} {'cpu s':>6s} {'opt it':>6s} {'ms/it':>6s} {'py peak MB':>10s} "
-              f"{'RSS MB':>7s} {'GPU MB':>7s} layers")
+              f"{'RSS MB':>7s} {'GPU MB':>7s} {'passes':>8s} layers")
     print(header, flush=True)
     for res in args.res:
         for name in args.shapes:
@@ -70,7 +71,8 @@ def main():
                   f"{t.get('field', 0):7.2f} {t['optimize']:7.1f} {t['layers']:7.2f} "
                   f"{t['cleanup']:7.2f} {sum(t.values()):8.1f} {cpu:6.1f} {iters:6d} "
                   f"{1e3 * t['optimize'] / max(iters, 1):6.0f} {peak / 2**20:10.0f} "
-                  f"{rss:7.0f} {gpu_mb:7.0f} {status}", flush=True)
+                  f"{rss:7.0f} {gpu_mb:7.0f} {result.stats['optimize_kernels']:>8s} {status}",
+                  flush=True)
             del grid, result
 
 

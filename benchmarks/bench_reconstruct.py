@@ -16,8 +16,8 @@ ball and the output's size; then Poisson's time and the ratio ours / Poisson; th
 cost per network query (wall, and the process time of all threads with the band: steadier on
 a shared machine), how much of it the radius policy took (the selector's or the curvature
 estimate's share: compare ``--radius-mode learned`` with ``fixed``) and of that the parent
-ball's neighbour search (which also gives the backbone its patches), the mesher's stages and
-iterations, and the field's floor: network queries x multiply-adds per query / the
+ball's neighbour search (which also gives the backbone its patches), the mesher's stages,
+iterations and passes (compiled, or numpy without numba or with ``UDF_RECON_KERNELS=numpy``), and the field's floor: network queries x multiply-adds per query / the
 multiply-add rate these cores reach on a large float32 matrix product, measured in the same run.
 Poisson needs open3d (requirements-bench.txt).
 
@@ -74,6 +74,7 @@ def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mod
             "lattice_step": stats.get("lattice_step", 1),
             "lattice_positions": stats.get("lattice_positions", 0),
             "iterations": stats["meshing"].get("iterations", 0),
+            "optimize_kernels": stats["meshing"].get("optimize_kernels", "numpy"),
             "macs_per_query": _macs_per_query(stats["mean_patch_points"])}
 
 
@@ -233,7 +234,7 @@ def main(argv=None) -> int:
         mesher = ", ".join(f"{key[len('meshing_'):]} {value:.2f}" for key, value in row.items()
                            if key.startswith("meshing_"))
         details.append(f"{resolution:>4} meshing stages (s): {mesher}; {row['iterations']} "
-                       f"iterations; network on {row['device']}")
+                       f"iterations ({row['optimize_kernels']} passes); network on {row['device']}")
         totals.append((resolution, row["total"]))
         floors.append((resolution, row["network_queries"] * row["macs_per_query"]))
         queries = max(row["network_queries"], 1)

@@ -223,6 +223,15 @@ class UDFGrid:
         self._bricks = (table, cells.reshape(-1, 3, 8), nbricks)
         return int(active.size)
 
+    def brick_arrays(self) -> tuple:
+        """The prepared bricks as plain arrays, for compiled lookups: the brick table (int32,
+        -1 where no brick), the cells' trilinear coefficients (cells, 3, 8) float32 (see
+        :meth:`_cell_coefficients`), the brick counts along y and z, the node counts per axis."""
+        if self._bricks is None:
+            self.prepare(4.0 * self.spacing + max(self.min_value, 0.0))
+        table, coefficients, nbricks = self._bricks
+        return (table, coefficients, int(nbricks[1]), int(nbricks[2])) + tuple(self.shape)
+
     def closest(self, points: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Distance and closest-point vector at world positions.
 

@@ -158,6 +158,7 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
                                     sub_progress(progress, 0.05, 0.9), cancel)
     timings["optimize"] = time.perf_counter() - start
     stats["optimize_device"] = device
+    stats["optimize_kernels"] = opt.kernels
     stats.update({"mean_distance_voxels": opt.mean_distance,
                   "max_distance_voxels": opt.max_distance, "iterations": opt.iterations})
 

@@ -17,6 +17,7 @@ Each iteration runs as passes over row ranges of the vertices and faces, one ran
 thread (:class:`_Cover`); the vertices come out the same, bit for bit, on any number of threads.
 """
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
@@ -46,6 +47,7 @@ class OptimizeStats:
     mean_distance: float
     max_distance: float
     mean_centroid_distance: float
+    kernels: str = "numpy"  # or "compiled" (numba loops), "torch" (optimize_torch)
 
 
 def learning_rate(it: int, total: int, lr: float) -> float:
@@ -53,6 +55,18 @@ def learning_rate(it: int, total: int, lr: float) -> float:
     warm = max(1, total // 16)
     rate = lr * min(1.0, (it + 1) / warm) * 0.5 * (1.0 + np.cos(np.pi * it / total))
     return rate * (0.1 if it >= total // 2 else 1.0)
+
+
+def compiled_kernels():
+    """The compiled passes (:mod:`.optimize_kernels`), or None: numba missing or refusing this
+    numpy, or ``UDF_RECON_KERNELS=numpy`` set."""
+    if os.environ.get("UDF_RECON_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from . import optimize_kernels
+    except Exception:  # ImportError, or numba's own error for a numpy it does not accept
+        return None
+    return optimize_kernels
 
 
 def _unit_inplace(vectors: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -121,14 +135,9 @@ class _Cover:
         self.ratio = n / max(m, 1)
         self.vrows, self.frows = _ranges(n, parts), _ranges(m, parts)
         lap = mesh_ops.uniform_laplacian(n, edges)
-        lap_t = lap.T.tocsr()
         cen = mesh_ops.centroid_matrix(n, faces)
-        cen_t = cen.T.tocsr()
         self.inc = mesh_ops.incidence_matrix(n, faces)
-        self.lap = [lap[r] for r in self.vrows]
-        self.lap_t = [lap_t[r] for r in self.vrows]
-        self.cen = [cen[r] for r in self.frows]
-        self.cen_t = [cen_t[r] for r in self.vrows]
+        self.operators(lap, lap.T.tocsr(), cen, cen.T.tocsr())
         self.cents, self.face_grad = np.empty((m, 3)), np.empty((m, 3))
         self.dv, self.dc = np.empty(n), np.empty(m)
         self.grad, self.wd = np.empty_like(g), np.empty_like(g)
@@ -140,6 +149,13 @@ class _Cover:
         self.vertex_cells = [CellCache() for _ in self.vrows]
         self.n0 = self.c0 = None  # stage 2's frozen normals and centroids
         self.capture = False  # the next face pass records c0
+
+    def operators(self, lap, lap_t, cen, cen_t) -> None:
+        """Keep the sparse operators, sliced by the rows of each range."""
+        self.lap = [lap[r] for r in self.vrows]
+        self.lap_t = [lap_t[r] for r in self.vrows]
+        self.cen = [cen[r] for r in self.frows]
+        self.cen_t = [cen_t[r] for r in self.vrows]
 
     def face_pass(self, k: int, stage1: bool, areas: bool) -> None:
         """Centroids, their distances and gradients (+ stage 2's sliding term); face areas."""
@@ -208,12 +224,51 @@ class _Cover:
         self.capture = True
 
 
+class _CompiledCover(_Cover):
+    """The same passes as :class:`_Cover` in compiled loops (:mod:`.optimize_kernels`)."""
+
+    def __init__(self, kernels, *args):
+        self.kernels = kernels
+        super().__init__(*args)
+        self.grid = self.field.brick_arrays()
+        self.none = np.zeros((0, 3))  # n0 / c0 before stage 2
+
+    def operators(self, lap, lap_t, cen, cen_t) -> None:
+        """Keep the whole operators as CSR arrays (the kernels read the rows of their range)."""
+        def arrays(matrix):
+            return matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data
+
+        self.lap, self.lap_t, self.cen_t = arrays(lap), arrays(lap_t), arrays(cen_t)
+
+    def face_pass(self, k: int, stage1: bool, areas: bool) -> None:
+        r = self.frows[k]
+        n0 = self.none if self.n0 is None else self.n0
+        c0 = self.none if self.c0 is None else self.c0
+        self.kernels.face_rows(r.start, r.stop, self.g, self.faces, self.grid, self.cents,
+                               self.dc, self.face_grad, not stage1, self.capture, n0, c0)
+        if stage1 and areas:
+            self.area[r] = mesh_ops.face_normals(self.g, self.faces[r])[1]
+
+    def vertex_pass(self, k: int, stage1: bool) -> None:
+        r = self.vrows[k]
+        self.kernels.vertex_rows(r.start, r.stop, self.g, self.grid, self.dv, self.grad, stage1,
+                                 self.lap, self.weight[:, 0], self.wd)
+
+    def step_pass(self, k: int, stage1: bool, rate: float, ran: int) -> None:
+        r = self.vrows[k]
+        self.kernels.step_rows(r.start, r.stop, self.g, self.grad, stage1, self.lap_t, self.wd,
+                               self.lam2, self.cen_t, self.face_grad, self.ratio, self.mom,
+                               self.vel, rate, 1 - BETA1 ** ran, 1 - BETA2 ** ran, BETA1, BETA2,
+                               EPS)
+
+
 def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
                    iterations: int = ITERATIONS, laplacian_weight: float = LAPLACIAN_WEIGHT,
                    lr: float = LR, normal_start: float = NORMAL_START,
                    progress: Optional[ProgressFn] = None,
                    cancel: Optional[CancelFn] = None, edges: Optional[np.ndarray] = None,
-                   early_stop: bool = True, threads: Optional[int] = None):
+                   early_stop: bool = True, threads: Optional[int] = None,
+                   compiled: bool = True):
     """Pull a double cover onto the zero set of ``field``.
 
     Parameters
@@ -243,6 +298,9 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
     threads : int, optional
         CPU threads; by default :func:`~engine.cpu_threads.cpu_threads` for covers of at least
         ``SPLIT_VERTICES`` vertices, else one. The result does not depend on it.
+    compiled : bool
+        Run the passes as compiled loops (:mod:`.optimize_kernels`) when numba is available and
+        the field is a grid (not an exact distance); False always runs the numpy passes.
 
     Returns
     -------
@@ -255,7 +313,9 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
     parts = max(1, min(int(threads), len(vertices), len(faces)))
     if edges is None:
         edges = mesh_ops.edge_topology(faces).edges
-    cover = _Cover(field.world_to_index(vertices), faces, edges, field, laplacian_weight, parts)
+    kernels = compiled_kernels() if compiled and field.exact is None else None
+    args = (field.world_to_index(vertices), faces, edges, field, laplacian_weight, parts)
+    cover = _Cover(*args) if kernels is None else _CompiledCover(kernels, *args)
     stage2 = int(round(normal_start * iterations))
     quiet = max(stage2, iterations // 2)  # stage 2 with the small step: may stop early
     stall = StallCheck(quiet, early_stop)
@@ -292,4 +352,6 @@ def optimize_cover(vertices: np.ndarray, faces: np.ndarray, field,
     finally:
         if pool is not None:
             pool.shutdown()
-    return field.index_to_world(cover.g), final_stats(ran, cover.dv, cover.dc)
+    stats = final_stats(ran, cover.dv, cover.dc)
+    stats.kernels = "numpy" if kernels is None else "compiled"
+    return field.index_to_world(cover.g), stats

@@ -161,5 +161,6 @@ def optimize_cover_torch(vertices: np.ndarray, faces: np.ndarray, field: UDFGrid
         g -= step * (mom / denom[:, None])
     dv, _ = query.closest_index(g)
     dc, _ = query.closest_index(cen @ g)
-    return (field.index_to_world(g.cpu().numpy()),
-            final_stats(ran, dv.cpu().numpy(), dc.cpu().numpy()))
+    stats = final_stats(ran, dv.cpu().numpy(), dc.cpu().numpy())
+    stats.kernels = "torch"
+    return field.index_to_world(g.cpu().numpy()), stats
