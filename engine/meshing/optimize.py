@@ -245,9 +245,8 @@ class _CompiledCover(_Cover):
         n0 = self.none if self.n0 is None else self.n0
         c0 = self.none if self.c0 is None else self.c0
         self.kernels.face_rows(r.start, r.stop, self.g, self.faces, self.grid, self.cents,
-                               self.dc, self.face_grad, not stage1, self.capture, n0, c0)
-        if stage1 and areas:
-            self.area[r] = mesh_ops.face_normals(self.g, self.faces[r])[1]
+                               self.dc, self.face_grad, not stage1, self.capture, n0, c0,
+                               stage1 and areas, self.area)
 
     def vertex_pass(self, k: int, stage1: bool) -> None:
         r = self.vrows[k]

@@ -58,12 +58,18 @@ def closest(x, y, z, table, coef, nb1, nb2, nx, ny, nz):
 
 
 @jit
-def face_rows(a, b, g, faces, grid, cents, dc, face_grad, stage2, capture, n0, c0):
-    """Centroids, their distances and gradients, and stage 2's sliding term, faces a:b."""
+def face_rows(a, b, g, faces, grid, cents, dc, face_grad, stage2, capture, n0, c0, areas, area):
+    """Centroids, their distances and gradients, and stage 2's sliding term, faces a:b; with
+    ``areas``, the faces' areas too."""
     table, coef, nb1, nb2, nx, ny, nz = grid
     third = 1.0 / 3.0
     for f in range(a, b):
         p, q, r = faces[f, 0], faces[f, 1], faces[f, 2]
+        if areas:
+            ux, uy, uz = g[q, 0] - g[p, 0], g[q, 1] - g[p, 1], g[q, 2] - g[p, 2]
+            wx, wy, wz = g[r, 0] - g[p, 0], g[r, 1] - g[p, 1], g[r, 2] - g[p, 2]
+            cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+            area[f] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
         for c in range(3):
             cents[f, c] = g[p, c] * third + g[q, c] * third + g[r, c] * third
         d, vx, vy, vz = closest(cents[f, 0], cents[f, 1], cents[f, 2],
