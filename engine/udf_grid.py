@@ -17,6 +17,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
+from .compiled import kernels as load_kernels
 from .errors import InputError
 
 BRICK = 4  # cells per brick side
@@ -173,23 +174,42 @@ class UDFGrid:
         a default of 4 voxels when it was not called). Returns the number of bricks.
         """
         dims = np.array(self.shape)
-        nbricks = (dims - 2) // BRICK + 1  # brick b covers cells 8b .. 8b+7 (cells 0 .. n-2)
+        nbricks = (dims - 2) // BRICK + 1  # brick b covers cells 4b .. 4b+3 (cells 0 .. n-2)
         nodes = self._small_nodes(band)
-        keys = []
-        for shift in np.ndindex(2, 2, 2):  # node 8q is also the last node of brick q-1
-            b = nodes // BRICK - np.array(shift) * (nodes % BRICK == 0)
+        brick, first = nodes // BRICK, nodes % BRICK == 0
+        marked = np.zeros(int(np.prod(nbricks)), bool)
+        for shift in np.ndindex(2, 2, 2):  # node 4q is also the last node of brick q-1
+            shift = np.array(shift)
+            rows = np.all(first[:, shift == 1], axis=1)  # all rows for no shift
+            b = brick[rows] - shift
             keep = np.all((b >= 0) & (b < nbricks), axis=1)
-            keys.append(np.ravel_multi_index(b[keep].T, nbricks))
-        active = np.unique(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+            marked[np.ravel_multi_index(b[keep].T, nbricks)] = True
+        active = np.flatnonzero(marked)
         table = np.full(int(np.prod(nbricks)), -1, dtype=np.int32)
         table[active] = np.arange(active.size)
-        field = np.zeros((active.size + 1, _NODES, _NODES, _NODES, 3), dtype=np.float32)
+        corners = np.stack(np.unravel_index(active, nbricks), axis=1) * BRICK
+        compiled = load_kernels("udf_grid_kernels")
+        if compiled is None:
+            cells = self._brick_coefficients(corners)
+        else:
+            dense = self._dense if self._dense is not None else np.zeros((0, 0, 0), np.float32)
+            band_flat, band_values = self._band if self._band is not None else (
+                np.zeros(0, np.int64), np.zeros(0, np.float32))
+            cells = compiled.bricks(corners, dims.astype(np.int64), band_flat, band_values, dense,
+                                    np.float32(self.far_value), float(self.spacing))
+        self._bricks = (table, cells.reshape(-1, 3, 8), nbricks)
+        return int(active.size)
+
+    def _brick_coefficients(self, corners: np.ndarray) -> np.ndarray:
+        """The trilinear coefficients (B + 1, BRICK, BRICK, BRICK, 3, 8) float32 of V in the
+        bricks whose first nodes are ``corners`` (B, 3) (the last brick: zeros), in numpy."""
+        dims = np.array(self.shape)
+        field = np.zeros((len(corners) + 1, _NODES, _NODES, _NODES, 3), dtype=np.float32)
         # Gather (BRICK + 3)^3 nodes per brick (one-node halo for the central differences) in
         # chunks, compute V = 1/2 grad(d^2) on the inner nodes.
-        bxyz = np.stack(np.unravel_index(active, nbricks), axis=1) * BRICK
         local = np.arange(-1, _NODES + 1)
-        for start in range(0, active.size, 2048):
-            base = bxyz[start:start + 2048]
+        for start in range(0, len(corners), 2048):
+            base = corners[start:start + 2048]
             idx = [np.clip(base[:, a, None] + local[None, :], 0, dims[a] - 1) for a in range(3)]
             flat = ((idx[0][:, :, None, None] * dims[1] + idx[1][:, None, :, None]) * dims[2]
                     + idx[2][:, None, None, :])
@@ -208,7 +228,7 @@ class UDFGrid:
                     0.5 * (d2[tuple(sl_p)] - d2[tuple(sl_m)]) / step)
         # per cell, the 8 coefficients of the trilinear polynomial of each channel side by side
         # (one row gather per query): 1, tz, ty, ty tz, tx, tx tz, tx ty, tx ty tz
-        cells = np.empty((active.size + 1, BRICK, BRICK, BRICK, 3, 8), dtype=np.float32)
+        cells = np.empty((len(corners) + 1, BRICK, BRICK, BRICK, 3, 8), dtype=np.float32)
         v = [field[:, dx:dx + BRICK, dy:dy + BRICK, dz:dz + BRICK]
              for dx, dy, dz in np.ndindex(2, 2, 2)]  # corner 4 dx + 2 dy + dz
         cells[..., 0] = v[0]
@@ -220,8 +240,7 @@ class UDFGrid:
         cells[..., 6] = v[6] - v[4] - v[2] + v[0]
         cells[..., 7] = v[7] - v[6] - v[5] + v[4] - v[3] + v[2] + v[1] - v[0]
         del v
-        self._bricks = (table, cells.reshape(-1, 3, 8), nbricks)
-        return int(active.size)
+        return cells
 
     def brick_arrays(self) -> tuple:
         """The prepared bricks as plain arrays, for compiled lookups: the brick table (int32,

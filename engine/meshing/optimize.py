@@ -17,13 +17,13 @@ Each iteration runs as passes over row ranges of the vertices and faces, one ran
 thread (:class:`_Cover`); the vertices come out the same, bit for bit, on any number of threads.
 """
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from ..compiled import kernels as load_kernels
 from ..cpu_threads import cpu_threads
 from ..progress import CancelFn, ProgressFn, check_cancel, no_progress
 from ..udf_grid import CellCache
@@ -58,15 +58,9 @@ def learning_rate(it: int, total: int, lr: float) -> float:
 
 
 def compiled_kernels():
-    """The compiled passes (:mod:`.optimize_kernels`), or None: numba missing or refusing this
-    numpy, or ``UDF_RECON_KERNELS=numpy`` set."""
-    if os.environ.get("UDF_RECON_KERNELS", "").lower() == "numpy":
-        return None
-    try:
-        from . import optimize_kernels
-    except Exception:  # ImportError, or numba's own error for a numpy it does not accept
-        return None
-    return optimize_kernels
+    """The compiled passes (:mod:`.optimize_kernels`), or None (see
+    :func:`engine.compiled.kernels`)."""
+    return load_kernels("meshing.optimize_kernels")
 
 
 def _unit_inplace(vectors: np.ndarray, lengths: np.ndarray) -> np.ndarray:

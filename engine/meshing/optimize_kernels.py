@@ -10,7 +10,7 @@ finished, so row ranges run on separate threads (the kernels release the GIL) an
 the same, bit for bit, on any number of threads.
 
 numba is optional: importing this module fails without it (or when it refuses this numpy or
-Python), and :func:`.optimize.compiled_kernels` then returns None and the numpy passes run.
+Python), and :func:`engine.compiled.kernels` then returns None and the numpy passes run.
 Compiled code is cached beside this file (or in numba's per-user cache when that
 folder is read-only), so only the first run on a machine pays for the compilation.
 """

@@ -108,3 +108,31 @@ def test_outside_band_is_far():
 def test_bad_grids_refused(make):
     with pytest.raises(InputError):
         make()
+
+
+@pytest.mark.parametrize("form", ["dense", "band"])
+def test_compiled_bricks_equal_the_numpy_ones_bit_for_bit(form, monkeypatch):
+    """numba is a runtime requirement (requirements.txt), so the compiled bricks are built here;
+    the grid reaches its borders (clipped halos) and the band leaves far nodes inside bricks."""
+    from engine.compiled import kernels
+
+    assert kernels("udf_grid_kernels") is not None
+    dense = A.sample_grid(A.torus((0.3, 0, 0), 0.55, 0.2), [-1] * 3, [1] * 3, 45, exact=False)
+    h = dense.spacing
+    udf = dense.slab(0, dense.shape[0])
+    idx = np.argwhere(udf < 2.5 * h)
+    grids = {}
+    for path in ("compiled", "numpy"):
+        if path == "numpy":
+            monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+        grid = dense if form == "dense" else UDFGrid.from_band(
+            idx, udf[tuple(idx.T)], dense.shape, dense.origin, h, far_value=2.5 * h)
+        if form == "dense":
+            grid = A.sample_grid(A.torus((0.3, 0, 0), 0.55, 0.2), [-1] * 3, [1] * 3, 45,
+                                 exact=False)
+        bricks = grid.prepare(3 * h)
+        grids[path] = grid.brick_arrays()
+        assert bricks > 0
+    (table, coef), (want_table, want_coef) = (grids[p][:2] for p in ("compiled", "numpy"))
+    assert np.array_equal(table, want_table)
+    assert np.abs(coef).max() > 0 and np.array_equal(coef, want_coef)
