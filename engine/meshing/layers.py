@@ -47,6 +47,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from ..compiled import kernels as load_kernels
 from ..progress import CancelFn, check_cancel
 from . import mesh_ops
 
@@ -81,6 +82,10 @@ def _candidates(tree, cents, normals, query, probe, k):
     _, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT,
                         workers=-1)
     idx = idx.reshape(len(query), k)
+    compiled = load_kernels("meshing.mesh_ops_kernels")
+    if compiled is not None:
+        return compiled.facing_candidates(idx.astype(np.int64), query.astype(np.int64), cents,
+                                          normals, OPPOSITE_COS)
     valid = idx < len(cents)
     rows, cols = np.nonzero(valid)
     f, g = query[rows], idx[rows, cols]

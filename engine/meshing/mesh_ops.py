@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..compiled import kernels as load_kernels
+
 
 @dataclass
 class EdgeTopology:
@@ -25,6 +27,11 @@ class EdgeTopology:
 def edge_topology(faces: np.ndarray) -> EdgeTopology:
     """Unique edges, the edge of every face side, and how many faces use each edge."""
     faces = np.asarray(faces, dtype=np.int64)
+    compiled = load_kernels("meshing.mesh_ops_kernels")
+    if compiled is not None and faces.size:
+        edges, inverse, counts = compiled.edge_topology(np.ascontiguousarray(faces),
+                                                        int(faces.max()) + 1)
+        return EdgeTopology(edges, inverse.reshape(-1, 3), counts)
     sides = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
     sides.sort(axis=1)
     n = int(faces.max()) + 1 if faces.size else 0

@@ -102,3 +102,47 @@ def test_specks_go_small_parts_stay():
     count, labels = mo.vertex_components(len(v), f)
     assert sorted(np.round(np.bincount(labels, weights=areas), 6)) == [4, 9, 121]
     assert not np.any((v[:, 2] != 0))  # what stays is the flat pieces, untouched
+
+
+def test_compiled_edge_topology_equals_the_numpy_one(monkeypatch):
+    """numba is a runtime requirement (requirements.txt): the compiled edges are made here. A
+    random soup has non-manifold edges (three or more faces), degenerate faces and unused
+    vertices."""
+    from engine.compiled import kernels
+
+    assert kernels("meshing.mesh_ops_kernels") is not None
+    rng = np.random.default_rng(3)
+    faces = rng.integers(0, 400, size=(3000, 3))
+    faces[:50, 1] = faces[:50, 0]  # degenerate
+    got = mo.edge_topology(faces)
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    want = mo.edge_topology(faces)
+    assert want.counts.max() >= 3
+    for name in ("edges", "face_edges", "counts"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+
+
+def test_compiled_twin_candidates_equal_the_numpy_ones(monkeypatch):
+    """The opposite-facing neighbours of a double cover's faces, compiled and in numpy."""
+    from scipy.spatial import cKDTree
+
+    from engine.meshing import layers
+    from engine.meshing.marching import double_cover
+    from lab import analytic
+
+    field = analytic.sample_grid(analytic.disk(radius=0.6), (-1, -1, -1), (1, 1, 1), 40,
+                                 exact=False)
+    vertices, faces, iso, _, _ = double_cover(field)
+    cents = mo.centroid_matrix(len(vertices), faces) @ vertices / field.spacing
+    normals = mo.face_normals(vertices, faces)[0]
+    query = np.arange(len(faces))
+    probe = cents - 2 * iso / field.spacing * normals  # the other layer, 2 iso behind
+    tree = cKDTree(cents)
+    got = layers._candidates(tree, cents, normals, query, probe, 12)
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    want = layers._candidates(tree, cents, normals, query, probe, 12)
+    assert len(want[0]) > len(faces) / 2  # most faces see their twin
+    for a, b in zip(got[:2], want[:2]):
+        assert np.array_equal(a, b)
+    for a, b in zip(got[2:], want[2:]):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)

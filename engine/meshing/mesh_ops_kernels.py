@@ -1,0 +1,98 @@
+"""Compiled mesh operations (numba), when numba is there (see :mod:`engine.compiled`).
+
+:func:`edge_topology` gives what :func:`.mesh_ops.edge_topology` gives, array for array, without
+sorting all face sides: the sides are bucketed by their smaller vertex (a counting sort), and each
+bucket, a vertex's few edges, is ordered by the larger one. :func:`facing_candidates` gives what
+:func:`.layers._candidates` gives after its neighbour search (the pairs that face apart, with
+depth and lateral offset), in one pass over the neighbour lists instead of a dozen array passes
+over all of them.
+"""
+
+import numba
+import numpy as np
+
+
+@numba.njit(nogil=True, cache=True)
+def edge_topology(faces, n):
+    """Unique edges (E, 2) sorted (as ``np.unique`` of ``lo * n + hi``), the edge of every face
+    side (m * 3,) and how many sides use each edge (E,), for faces (m, 3) int64 over n
+    vertices."""
+    m = faces.shape[0]
+    sides = 3 * m
+    lo = np.empty(sides, np.int64)
+    hi = np.empty(sides, np.int64)
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for k in range(3):
+            a, b = faces[f, k], faces[f, (k + 1) % 3]
+            s = 3 * f + k
+            lo[s], hi[s] = min(a, b), max(a, b)
+            start[lo[s] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    order = np.empty(sides, np.int64)
+    for s in range(sides):  # by smaller vertex, then by side (stable)
+        order[fill[lo[s]]] = s
+        fill[lo[s]] += 1
+    inverse = np.empty(sides, np.int64)
+    edges = np.empty((sides, 2), np.int64)
+    counts = np.zeros(sides, np.int64)
+    count = 0
+    for v in range(n):
+        a, b = start[v], start[v + 1]
+        for i in range(a + 1, b):  # insertion sort of the bucket by larger vertex
+            s = order[i]
+            j = i - 1
+            while j >= a and hi[order[j]] > hi[s]:
+                order[j + 1] = order[j]
+                j -= 1
+            order[j + 1] = s
+        previous = -1
+        for i in range(a, b):
+            s = order[i]
+            if hi[s] != previous:
+                previous = hi[s]
+                edges[count, 0], edges[count, 1] = v, previous
+                count += 1
+            inverse[s] = count - 1
+            counts[count - 1] += 1
+    return edges[:count].copy(), inverse, counts[:count].copy()
+
+
+@numba.njit(nogil=True, cache=True)
+def facing_candidates(neighbours, query, cents, normals, opposite_cos):
+    """The pairs (face ``query[i]``, neighbour) of ``neighbours`` (Q, k) (``len(cents)``: none)
+    whose normals face apart (cosine below ``opposite_cos``), in row order, with the neighbour's
+    depth along the face's normal and its distance from the face's normal line."""
+    m = cents.shape[0]
+    total = 0
+    for i in range(neighbours.shape[0]):
+        f = query[i]
+        for j in range(neighbours.shape[1]):
+            g = neighbours[i, j]
+            if g < m and (normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1]
+                          + normals[f, 2] * normals[g, 2]) < opposite_cos:
+                total += 1
+    face = np.empty(total, np.int64)
+    other = np.empty(total, np.int64)
+    depth = np.empty(total)
+    lateral = np.empty(total)
+    p = 0
+    for i in range(neighbours.shape[0]):
+        f = query[i]
+        for j in range(neighbours.shape[1]):
+            g = neighbours[i, j]
+            if g < m and (normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1]
+                          + normals[f, 2] * normals[g, 2]) < opposite_cos:
+                ox = cents[g, 0] - cents[f, 0]
+                oy = cents[g, 1] - cents[f, 1]
+                oz = cents[g, 2] - cents[f, 2]
+                d = ox * normals[f, 0] + oy * normals[f, 1] + oz * normals[f, 2]
+                ox -= d * normals[f, 0]
+                oy -= d * normals[f, 1]
+                oz -= d * normals[f, 2]
+                face[p], other[p], depth[p] = f, g, d
+                lateral[p] = np.sqrt(ox * ox + oy * oy + oz * oz)
+                p += 1
+    return face, other, depth, lateral
