@@ -8,12 +8,6 @@ this numpy or Python, and the numpy code runs.
 
 import importlib
 import os
-import threading
-from typing import Optional
-
-from .progress import CancelFn, ProgressFn, check_cancel
-
-_warm_up: Optional[threading.Thread] = None  # the warm-up thread, once started
 
 
 def kernels(module: str):
@@ -32,26 +26,13 @@ def warm_up() -> None:
     and its cached machine code take a second or two per process (and the first run on a machine
     compiles them), which the mesher would otherwise wait for. It meshes a small sphere, which
     calls every kernel with the argument types of a real run; its result is dropped, and a
-    failure only means the mesher loads the kernels itself. Once per process."""
-    global _warm_up
-    if _warm_up is not None or os.environ.get("UDF_RECON_KERNELS", "").lower() == "numpy":
+    failure only means the mesher loads the kernels itself."""
+    if os.environ.get("UDF_RECON_KERNELS", "").lower() == "numpy":
         return
-    _warm_up = threading.Thread(target=_mesh_a_small_sphere, name="udf-kernels-warm-up",
-                                daemon=True)
-    _warm_up.start()
+    import threading
 
-
-def wait_for_warm_up(progress: ProgressFn, cancel: Optional[CancelFn], fraction: float) -> None:
-    """Before the mesher's first kernel: while the warm-up still runs (the first run on a
-    machine compiles for a while), say so and wait, checking ``cancel``."""
-    thread = _warm_up
-    if thread is None or thread is threading.current_thread() or not thread.is_alive():
-        return
-    progress(fraction, "loading the mesher's compiled loops (the first run on a computer also "
-                       "compiles them, once)")
-    while thread.is_alive():
-        check_cancel(cancel)
-        thread.join(0.2)
+    threading.Thread(target=_mesh_a_small_sphere, name="udf-kernels-warm-up",
+                     daemon=True).start()
 
 
 def _mesh_a_small_sphere() -> None:

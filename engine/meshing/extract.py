@@ -11,7 +11,6 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from ..compiled import wait_for_warm_up
 from ..devices import resolve_device
 from ..errors import InputError
 from ..geometry import Mesh
@@ -126,7 +125,6 @@ def extract_surface(field: UDFGrid, settings: Optional[MeshingSettings] = None,
         device = "cpu"
         messages.append("an exact (analytic) field is optimised on the CPU")
 
-    wait_for_warm_up(progress, cancel, 0.0)
     start = time.perf_counter()
     verts, faces, iso, report, notes = double_cover(
         field, settings.iso, sub_progress(progress, 0.0, 0.05), cancel)

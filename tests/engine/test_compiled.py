@@ -38,26 +38,3 @@ def test_numpy_only_means_no_numba_at_all():
             "from engine.meshing.optimize import compiled_kernels; "
             "print(compiled_kernels() is None, 'numba' in sys.modules)")
     assert _run(code, UDF_RECON_KERNELS="numpy") == "True False"
-
-
-def test_the_mesher_says_why_it_waits_for_the_warm_up_and_can_be_cancelled(monkeypatch):
-    import threading
-    import time
-
-    import pytest
-
-    from engine import compiled
-    from engine.errors import Cancelled
-
-    slow = threading.Thread(target=time.sleep, args=(5,), daemon=True)
-    slow.start()
-    monkeypatch.setattr(compiled, "_warm_up", slow)
-    said = []
-    started = time.perf_counter()
-    with pytest.raises(Cancelled):
-        compiled.wait_for_warm_up(lambda f, text: said.append(text), lambda: True, 0.0)
-    assert time.perf_counter() - started < 1.0
-    assert said and "compiled loops" in said[0]
-    monkeypatch.setattr(compiled, "_warm_up", None)
-    compiled.wait_for_warm_up(lambda f, text: said.append(text), lambda: True, 0.0)  # no wait
-    assert len(said) == 1
