@@ -17,7 +17,6 @@ import os
 import sys
 from typing import Callable, List, Optional, Sequence
 
-from .compiled import warm_up
 from .errors import InputError
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 
@@ -102,10 +101,8 @@ def _windowed(submit: Callable, wait_some: Callable, order: List[int], job, wind
 
 
 def _one_thread() -> None:
-    """Worker start-up: one thread per worker process (the workers fill the cores); the compiled
-    kernels load in the background while the first tile's field is computed."""
+    """Worker start-up: one thread per worker process (the workers fill the cores)."""
     os.environ["OMP_NUM_THREADS"] = "1"
-    warm_up()
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:
