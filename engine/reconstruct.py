@@ -18,7 +18,6 @@ from typing import Dict, List, Optional, Union
 
 import numpy as np
 
-from .compiled import warm_up
 from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
 from .detail import AUTO_MAX_CELLS, choose_detail
@@ -105,7 +104,6 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     started = time.perf_counter()
     progress = progress or no_progress
     settings = ReconstructSettings.coerce(settings)
-    warm_up()  # the mesher's compiled kernels load while the field is computed
     udf_source = udf_source or settings.udf_source
     if udf_source not in UDF_SOURCES:
         raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")

@@ -76,16 +76,12 @@ def main() -> int:
         if result != {'FINISHED'} or dependencies.missing_packages():
             step("FAILED: the install did not bring the packages")
             return 1
-    for module in ("numpy", "scipy", "skimage", "laspy", "trimesh", "numba"):
+    for module in ("numpy", "scipy", "skimage", "laspy", "trimesh"):
         try:
             loaded = importlib.import_module(module)
             step(f"  {module} {getattr(loaded, '__version__', '?')} from {loaded.__file__}")
         except ImportError as error:
             step(f"  {module}: {error}")
-
-    compiled = importlib.import_module(EXTENSION + ".engine.compiled")
-    passes = compiled.kernels("meshing.optimize_kernels")
-    step(f"mesher passes: {'compiled (numba)' if passes is not None else 'numpy'}")
 
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.context.scene.udf_reconstruction.resolution = args.resolution
