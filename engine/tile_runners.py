@@ -26,6 +26,8 @@ IN_FLIGHT = 2
 """Tiles sent ahead per worker (one running, one waiting)."""
 CONNECT_SECONDS = 10
 """How long to try reaching a Dask scheduler before saying it cannot be reached."""
+TERMINATE_SECONDS = 2.0
+"""How long a stopped worker process may take to end before it is killed."""
 
 
 def available_cores() -> int:
@@ -128,8 +130,14 @@ def _in_processes(task, order, job, workers, progress, cancel) -> List:
                          "script that calls reconstruct() outside `if __name__ == "
                          "\"__main__\":`); run with workers=1 to use this process only") from None
     finally:
-        for process in list(getattr(pool, "_processes", {}).values()):
+        processes = list(getattr(pool, "_processes", {}).values())
+        for process in processes:
             process.terminate()  # a cancel or an error: stop the tiles still running
+        for process in processes:
+            # a worker inside numba's compiler (LLVM's signal handlers) may not end on SIGTERM
+            process.join(TERMINATE_SECONDS)
+            if process.is_alive():
+                process.kill()
         pool.shutdown(wait=True, cancel_futures=True)
 
 
