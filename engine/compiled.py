@@ -8,6 +8,7 @@ this numpy or Python, and the numpy code runs.
 
 import importlib
 import os
+import sys
 
 
 def kernels(module: str):
@@ -15,6 +16,11 @@ def kernels(module: str):
     numpy, or ``UDF_RECON_KERNELS=numpy`` set (the numpy code everywhere)."""
     if os.environ.get("UDF_RECON_KERNELS", "").lower() == "numpy":
         return None
+    if "numba" not in sys.modules and "NUMBA_CACHE_DIR" not in os.environ:
+        # numba's cache is keyed by source file, but its entries name the module: the engine
+        # imported as ``engine`` (CLI, tests) and inside the extension's package must not share
+        os.environ["NUMBA_CACHE_DIR"] = os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                                     "__pycache__", "numba-" + __package__)
     try:
         return importlib.import_module(f"{__package__}.{module}")
     except Exception:  # ImportError, or numba's own error for a numpy it does not accept
