@@ -60,6 +60,13 @@ def edge_topology(faces, n):
     return edges[:count].copy(), inverse, counts[:count].copy()
 
 
+@numba.njit(nogil=True, cache=True, inline="always")
+def _apart(normals, f, g, opposite_cos):
+    """Whether faces f and g face apart (their normals' cosine below ``opposite_cos``)."""
+    return (normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1]
+            + normals[f, 2] * normals[g, 2]) < opposite_cos
+
+
 @numba.njit(nogil=True, cache=True)
 def facing_candidates(neighbours, query, cents, normals, opposite_cos):
     """The pairs (face ``query[i]``, neighbour) of ``neighbours`` (Q, k) (``len(cents)``: none)
@@ -71,8 +78,7 @@ def facing_candidates(neighbours, query, cents, normals, opposite_cos):
         f = query[i]
         for j in range(neighbours.shape[1]):
             g = neighbours[i, j]
-            if g < m and (normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1]
-                          + normals[f, 2] * normals[g, 2]) < opposite_cos:
+            if g < m and _apart(normals, f, g, opposite_cos):
                 total += 1
     face = np.empty(total, np.int64)
     other = np.empty(total, np.int64)
@@ -83,8 +89,7 @@ def facing_candidates(neighbours, query, cents, normals, opposite_cos):
         f = query[i]
         for j in range(neighbours.shape[1]):
             g = neighbours[i, j]
-            if g < m and (normals[f, 0] * normals[g, 0] + normals[f, 1] * normals[g, 1]
-                          + normals[f, 2] * normals[g, 2]) < opposite_cos:
+            if g < m and _apart(normals, f, g, opposite_cos):
                 ox = cents[g, 0] - cents[f, 0]
                 oy = cents[g, 1] - cents[f, 1]
                 oz = cents[g, 2] - cents[f, 2]
