@@ -568,4 +568,4 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     mesh_stats = {**stitched, "tiles_turned": int(len(turn)),
                   "iso": float(np.median(isos)) if isos else 0.0}
     progress(1.0, "tiles stitched")
-    return vertices, faces.astype(np.int64), field_stats, mesh_stats
+    return vertices, faces.astype(np.int64, copy=False), field_stats, mesh_stats
