@@ -6,7 +6,7 @@ Usage (from the repository root)::
     python benchmarks/bench_reconstruct.py [--resolutions 128 256] [--device cpu]
                                            [--udf-source network] [--input examples/owl_50k.ply]
                                            [--radius-mode fixed|curvature|learned] [--no-poisson]
-    python benchmarks/bench_reconstruct.py --kernels [--resolutions 128]
+    python benchmarks/bench_reconstruct.py --kernels [--resolutions 128] [--widths 32/64 ...]
 
 Each run (ours per resolution, then Poisson at depth 9) goes in a fresh child process so its peak
 resident memory (``ru_maxrss``) is its own. Prints one table row per resolution: wall seconds
@@ -23,7 +23,9 @@ Poisson needs open3d (requirements-bench.txt).
 
 ``--kernels`` times only the numpy backbone and selector, on one thread, on the patches and
 parent balls the field gives them at the first resolution (process time per query, the best of
-three passes): the figure to compare between two versions of the kernels.
+three passes): the figure to compare between two versions of the kernels. ``--widths 48/96
+32/64`` adds the backbone's time at narrower per-point and head widths on the same patches
+(random weights, for the cost alone).
 """
 
 import argparse
@@ -90,11 +92,15 @@ def _policy_detail(row: dict, queries: int, rest: float) -> str:
             f"it adds {100 * (row['radius_s'] - row['parent_s']) / rest:.0f}%)")
 
 
-def _macs_per_query(points: float) -> int:
-    """The backbone's multiply-adds for one query of ``points`` patch points."""
+def _macs_per_query(points: float, hidden: int = 0, head_width: int = 0) -> int:
+    """The backbone's multiply-adds for one query of ``points`` patch points (the shipped
+    backbone's, or at another ``hidden`` and ``head_width``)."""
     from engine.backbone import macs_per_query, weights_meta
 
-    return macs_per_query(weights_meta()["config"], max(int(round(points)), 1))
+    config = weights_meta()["config"]
+    if hidden:
+        config = dict(config, hidden=hidden, head_width=head_width)
+    return macs_per_query(config, max(int(round(points)), 1))
 
 
 def run_poisson(path: str) -> dict:
@@ -112,9 +118,13 @@ def run_poisson(path: str) -> dict:
             "peak_gib": usage.ru_maxrss / 2 ** 20, "faces": int(len(mesh.faces))}
 
 
-def kernel_timings(path: str, resolution: int, repeats: int = 3) -> str:
+def kernel_timings(path: str, resolution: int, repeats: int = 3, widths=()) -> str:
     """The numpy backbone and selector alone, on one thread, on the inputs the field gives them
-    for ``path`` at ``resolution``: process time per query, the best of ``repeats`` passes."""
+    for ``path`` at ``resolution``: process time per query, the best of ``repeats`` passes.
+
+    ``widths``: ``(hidden, head_width)`` pairs; the backbone's forward pass at each of those
+    configurations (seeded random weights: the time does not depend on them) on the same
+    patches, one line each."""
     sys.path.insert(0, str(ROOT))
     import numpy as np
     from scipy.spatial import cKDTree
@@ -161,14 +171,39 @@ def kernel_timings(path: str, resolution: int, repeats: int = 3) -> str:
             times.append(time.process_time() - start)
         return min(times)
 
+    narrower = {width: _random_backbone(*width) for width in widths}
     with threadpool_limits(1):
         seconds_backbone = best(lambda: [backbone.predict(r, m) for r, m in fixed_patches])
         seconds_selector = best(lambda: radius_net.predict_unit(rel, mask, extra))
+        seconds_narrower = {width: best(lambda: [net.predict(r, m) for r, m in fixed_patches])
+                            for width, net in narrower.items()}
     count = sum(len(r) for r, _ in fixed_patches)
-    return (f"{resolution:>4} kernels, one thread, process time (best of {repeats}): backbone "
+    lines = []
+    for (hidden, head_width), seconds in seconds_narrower.items():
+        lines.append(f"{resolution:>4} backbone H = {hidden}, head {head_width} (random weights): "
+                     f"{1e6 * seconds / count:.1f} us per query, "
+                     f"{_macs_per_query(_mean_points(fixed_patches), hidden, head_width):,} "
+                     f"multiply-adds per query")
+    return "\n".join([f"{resolution:>4} kernels, one thread, process time (best of {repeats}): backbone "
             f"{1e6 * seconds_backbone / count:.1f} us per query on the fixed radius's "
             f"{count:,} trimmed patches; selector network {1e6 * seconds_selector / len(rel):.1f}"
-            f" us per query on the learned mode's {len(rel):,} parent balls")
+            f" us per query on the learned mode's {len(rel):,} parent balls"] + lines)
+
+
+def _random_backbone(hidden: int, head_width: int):
+    """A numpy backbone of that width with seeded random weights (for timing only)."""
+    import torch
+
+    from engine.backbone import DEFAULT_CONFIG, NumpyBackbone, build_backbone_torch
+
+    torch.manual_seed(0)
+    config = dict(DEFAULT_CONFIG, hidden=hidden, head_width=head_width)
+    module = build_backbone_torch(config)
+    return NumpyBackbone({k: v.detach().numpy() for k, v in module.state_dict().items()}, config)
+
+
+def _mean_points(patches) -> float:
+    return sum(int(m.sum()) for _, m in patches) / max(sum(len(m) for _, m in patches), 1)
 
 
 def multiply_add_rate(threads: int) -> float:
@@ -197,6 +232,9 @@ def main(argv=None) -> int:
     parser.add_argument("--kernels", action="store_true",
                         help="only time the numpy backbone and selector, on one thread, on the "
                              "inputs the field gives them at the first resolution")
+    parser.add_argument("--widths", nargs="*", default=[], metavar="H/HEAD",
+                        help="with --kernels: also time the backbone at these widths (per-point "
+                             "H / head MLP), e.g. 48/96 32/64, with random weights")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--poisson-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -204,7 +242,8 @@ def main(argv=None) -> int:
         print(json.dumps(run_poisson(args.input)))
         return 0
     if args.kernels:
-        print(kernel_timings(args.input, args.resolutions[0]))
+        print(kernel_timings(args.input, args.resolutions[0],
+                             widths=[tuple(int(x) for x in w.split("/")) for w in args.widths]))
         return 0
     if args.child:
         print(json.dumps(run_one(args.input, args.child, args.device, args.udf_source,

@@ -112,6 +112,10 @@ def main(argv=None):
     parser.add_argument("--val-seed", type=int, default=990001)
     parser.add_argument("--val-every", type=int, default=500)
     parser.add_argument("--checkpoint-minutes", type=float, default=2.0)
+    parser.add_argument("--hidden", type=int, default=bb.DEFAULT_CONFIG["hidden"],
+                        help="per-point feature width H")
+    parser.add_argument("--head-width", type=int, default=bb.DEFAULT_CONFIG["head_width"],
+                        help="width of the head MLP and of the attention-query MLP")
     args = parser.parse_args(argv)
 
     import torch
@@ -123,7 +127,8 @@ def main(argv=None):
     log("command: python -m lab.training.train_backbone " + " ".join(sys.argv[1:] if argv is None else argv))
 
     device = torch.device(args.device)
-    model = bb.build_backbone_torch(bb.DEFAULT_CONFIG).to(device)
+    model = bb.build_backbone_torch(dict(bb.DEFAULT_CONFIG, hidden=args.hidden,
+                                         head_width=args.head_width)).to(device)
     config = model.config
     optimizer = torch.optim.Adam(model.parameters(), lr=args.lr)
     step, elapsed = 0, 0.0
