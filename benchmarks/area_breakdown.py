@@ -3,6 +3,8 @@
     python benchmarks/area_breakdown.py DOMAIN CONDITION [--seed 1000000] [--radius-mode fixed]
         [--resolution 256] [--mesh saved.npz]
 
+DOMAIN ``real`` takes the ``--seed``-th mesh of ``lab.bench.dataset.REAL_SHAPES`` (0-9).
+
 Reconstructs one test shape of the benchmark (``lab.bench.dataset``) as ``python -m lab bench``
 does (rooms: both meshes cropped as the benchmark crops them), then samples the true surface and
 splits the share of it that lies farther than 0.5, 1 and 2 grid spacings from the mesh into:
@@ -18,8 +20,10 @@ splits the share of it that lies farther than 0.5, 1 and 2 grid spacings from th
   the crossing there;
 * **elsewhere**: holes in the open.
 
-It also prints the share of the mesh farther than one spacing from the truth, and the area
-ratio against the truth with its close sheets counted once (area x (1 - close share / 2)). ``--mesh`` reads
+It also prints the share of the mesh farther than one spacing from the truth, the area
+ratio against the truth with its close sheets counted once (area x (1 - close share / 2)), and
+where extra area lies: the mesh's and the truth's area within 1, 2, 4 and 8 spacings of the
+truth's open boundary, with both boundaries' lengths. ``--mesh`` reads
 (or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
 """
 
@@ -89,9 +93,30 @@ def rim_distance(vertices, faces, points):
     return cKDTree(on_edges).query(points, workers=-1)[0]
 
 
+def boundary_length(vertices, faces) -> float:
+    topo = mesh_ops.edge_topology(faces)
+    edges = topo.edges[topo.counts == 1]
+    return float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).sum())
+
+
+def print_rim_area(tv, tf, pv, pf, on_truth, on_pred, area_ratio, spacing):
+    """The mesh's and the truth's area near the truth's open boundary, as shares of the truth's
+    area (``on_truth``, ``on_pred``: uniform samples of each; the mesh's share is scaled by
+    ``area_ratio``)."""
+    print(f"open boundary: truth {boundary_length(tv, tf) / spacing:.0f} spacings long, mesh "
+          f"{boundary_length(pv, pf) / spacing:.0f}")
+    to_truth = rim_distance(tv, tf, on_truth) / spacing
+    to_pred = rim_distance(tv, tf, on_pred) / spacing
+    print("| within the truth's rim | truth's area | mesh's area |")
+    print("|---|---:|---:|")
+    for limit in (1.0, 2.0, 4.0, 8.0, np.inf):
+        print(f"| {limit:g} spacings | {(to_truth < limit).mean():.4f} | "
+              f"{area_ratio * (to_pred < limit).mean():.4f} |")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("domain", choices=dataset.DOMAINS)
+    parser.add_argument("domain", choices=dataset.DOMAINS + (dataset.REAL,))
     parser.add_argument("condition", choices=("clean", "sparse", "noisy"))
     parser.add_argument("--seed", type=int, default=1_000_000)
     parser.add_argument("--radius-mode", default="fixed")
@@ -147,6 +172,7 @@ def main():
         shares = [100 * (miss & kind).mean() for kind in (rim, close, junction, rest)]
         print(f"| {limit} spacing | {100 * miss.mean():.2f} % | "
               + " | ".join(f"{share:.2f} %" for share in shares) + " |")
+    print_rim_area(tv, tf, pv, pf, points, on_pred[:SAMPLES], p_area / t_area, spacing)
     off, nearest = cKDTree(points).query(on_pred[:SAMPLES], workers=-1)
     far = off / spacing > 1
     print(f"mesh farther than 1 spacing from the truth: {100 * far.mean():.2f} %; of the mesh, "
