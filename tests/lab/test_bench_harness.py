@@ -144,6 +144,36 @@ def test_rooms_are_cropped_to_the_input_when_the_dataset_can():
     assert cropped["shapes"][0]["f1_0.01"] > plain["shapes"][0]["f1_0.01"]
 
 
+def test_rooms_crop_the_prediction_to_the_clean_scan_not_to_a_sparser_input():
+    """A perfect prediction of a sparse scan scores as it does on the clean scan: the prediction
+    is cropped to the region the ground truth is cropped to, not to the sparse input's points
+    (which would cut it at every gap between them)."""
+    dataset = fake_dataset(crop=True)
+    clean_scan = dataset.make_input
+
+    def make_input(gt, domain, condition, seed):
+        cloud = clean_scan(gt, domain, "clean", seed)
+        return PointCloud(cloud.points[::10]) if condition == "sparse" else cloud
+
+    dataset.make_input = make_input
+    scores = {condition: run_benchmark(harness.ground_truth, "rooms", condition, 1,
+                                       samples=SAMPLES, dataset=dataset, pass_ground_truth=True,
+                                       crop_max_dist=0.05)["shapes"][0]
+              for condition in ("clean", "sparse")}
+    assert scores["sparse"]["points"] == 200
+    assert scores["sparse"]["area_ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert all(scores["sparse"][key] == scores["clean"][key] for key in METRIC_KEYS)
+
+
+def test_resume_refuses_a_result_scored_under_another_protocol(tmp_path):
+    first = run(lambda cloud: sphere(2), count=1, domain="rooms", dataset=fake_dataset(crop=True))
+    earlier = harness.read_json(write_json(first, str(tmp_path)))
+    earlier["protocol"] = earlier["protocol"].replace("GT and prediction", "GT")
+    with pytest.raises(ValueError, match="protocol"):
+        run(lambda cloud: sphere(2), count=1, domain="rooms", dataset=fake_dataset(crop=True),
+            earlier=earlier)
+
+
 def test_table_and_json(tmp_path):
     result = run(lambda cloud: sphere(2), name="toy")
     table = format_table([result]).splitlines()
