@@ -24,7 +24,9 @@ of a room scan at 256), nodes up to ``SPARSE_BAND_NODES`` spacings away get the 
 far out as their nearest point's 4th neighbour: a nearest-point distance there rises above the
 iso-level between the samples and left holes in the mesh. Every other node is farther than R
 from all input points and holds R: the field is the UDF truncated at R, which is all the mesher
-needs.
+needs. With ``fill_gaps``, nodes in the plane of a sparse scan's points and surrounded by them,
+up to ``gap_fill.GAP_NODES`` spacings from the nearest, take the distance to that plane
+(:mod:`.gap_fill`): the surface runs on across gaps wider than the band.
 
 ``udf_source="nearest"`` replaces the network by the distance to the nearest input point: the
 non-learned baseline, exact on the band up to the sampling gaps of the cloud.
@@ -40,6 +42,7 @@ import numpy as np
 from .cpu_threads import cpu_threads, map_in_threads, run_in_threads
 from .devices import resolve_device
 from .errors import InputError
+from .gap_fill import fill_gaps
 from .udf_grid import UDFGrid
 from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
                       patches_from_neighbours)
@@ -286,6 +289,11 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
                                        stats, (nodes, lattice_origin, spacing))
     else:
         values = nearest.astype(np.float32)
+    stats["gap_nodes"] = 0
+    if settings.fill_gaps:
+        progress(0.95, "filling the gaps of a sparse scan")
+        indices, values, stats["gap_nodes"] = fill_gaps(
+            tree, points, shape, origin, spacing, indices, values)
     stats["seconds_udf"] = time.perf_counter() - started
     # the radius lattice's time, then the policy's share of the batches' time
     lattice_seconds = stats.pop("lattice_seconds", 0.0)

@@ -265,6 +265,12 @@ class ReconstructSettings:
         help="a point is isolated when its gap to its neighbours is more than this many times "
              "that of the points around it (lower finds more)",
         low=1.5, high=20, step=10, precision=1)
+    fill_gaps: bool = setting(
+        False, "Fill Gaps",
+        "Carry flat surfaces across gaps between the points of a sparse scan that are wider "
+        "than the ball radius (rims, where the points lie on one side only, stay open)",
+        help="carry flat surfaces across the gaps of a sparse scan wider than the ball radius "
+             "(open rims stay open)")
     udf_source: str = setting(
         "network", "Distances",
         "Where the distances to the surface come from: the network, or the nearest point (a "

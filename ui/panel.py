@@ -140,6 +140,7 @@ class UDFR_PT_advanced(bpy.types.Panel):
         layout.prop(props, "seed")
         layout.prop(props, "min_component_faces")
         layout.prop(props, "tile_cells")
+        layout.prop(props, "fill_gaps")
         layout.prop(props, "outliers")
         row = layout.row()
         row.enabled = props.outliers != "keep"

@@ -43,6 +43,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--radius", type=float, default=None,
                         help="ball radius of ours in fixed mode, unit frame (default: the "
                              "engine's, 0.018); results are then named ours-r<radius>")
+    parser.add_argument("--fill-gaps", action="store_true",
+                        help="ours fills the gaps of sparse scans wider than the ball radius "
+                             "(the engine's --fill-gaps); results are then named ...-gaps")
     parser.add_argument("--domain", default="all", choices=DOMAIN_NAMES + ("real", "all"),
                         help="a domain of test shapes, all three, or real: the real meshes of "
                              "lab.bench.dataset.REAL_SHAPES, sampled like the objects")
@@ -107,6 +110,8 @@ def _factory(args, name: str, radius_mode: str, radius=None):
             radius = args.radius if radius is None else radius
             if radius is not None:
                 options["radius"] = radius
+            if args.fill_gaps:
+                options["fill_gaps"] = True
     return functools.partial(make_method, name, **options)
 
 
@@ -180,7 +185,8 @@ def _report(args, domains, conditions) -> int:
     from .harness import first_shapes, format_table, read_json
     from .methods import ours_name
 
-    name = ours_name(args.radius_mode, args.radius) if args.method == "ours" else args.method
+    name = (ours_name(args.radius_mode, args.radius, args.fill_gaps) if args.method == "ours"
+            else args.method)
     results, missing = [], []
     for condition in conditions:
         for domain in domains:
@@ -238,7 +244,7 @@ def _run_table(args, domains, conditions, progress) -> int:
             def name(domain):
                 if method_name != "ours":
                     return method_name
-                return ours_name(mode, radii[domain] if radii else None)
+                return ours_name(mode, radii[domain] if radii else None, args.fill_gaps)
 
             if args.report:
                 if radii and not any(os.path.exists(os.path.join(

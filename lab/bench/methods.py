@@ -154,20 +154,22 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
     if udf_source == "nearest":
         ours.__name__ = "nearest-udf"
     else:
-        ours.__name__ = ours_name(radius_mode, config.radius)
+        ours.__name__ = ours_name(radius_mode, config.radius, config.fill_gaps)
     return ours
 
 
-def ours_name(radius_mode: str = "fixed", radius: float = None) -> str:
+def ours_name(radius_mode: str = "fixed", radius: float = None, fill_gaps: bool = False) -> str:
     """The result name of ours: ``ours`` (fixed, default radius), ``ours-r<radius>`` (fixed,
-    another radius) or ``ours-<mode>``; the JSON files are named after it."""
+    another radius) or ``ours-<mode>``, with ``-gaps`` appended when it fills the gaps of sparse
+    scans; the JSON files are named after it."""
     from engine.settings import ReconstructSettings
 
+    gaps = "-gaps" if fill_gaps else ""
     if radius_mode != "fixed":
-        return f"ours-{radius_mode}"
+        return f"ours-{radius_mode}{gaps}"
     if radius is None or radius == ReconstructSettings().radius:
-        return "ours"
-    return f"ours-r{radius:g}"
+        return f"ours{gaps}"
+    return f"ours-r{radius:g}{gaps}"
 
 
 def _check_radius_mode(config) -> None:

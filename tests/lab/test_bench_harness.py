@@ -428,6 +428,9 @@ def test_results_of_another_radius_get_their_own_name():
     assert methods.make_method("ours", radius=0.024).__name__ == "ours-r0.024"
     assert methods.make_method("ours", radius=0.018).__name__ == "ours"
     assert methods.ours_name("learned", 0.024) == "ours-learned"
+    assert methods.make_method("ours", radius_mode="learned", fill_gaps=True).__name__ == \
+        "ours-learned-gaps"
+    assert methods.ours_name("fixed", 0.03, True) == "ours-r0.03-gaps"
 
 
 def test_poisson_is_deterministic_and_closes_a_sphere():

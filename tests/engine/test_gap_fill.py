@@ -1,0 +1,75 @@
+"""Gap filling (engine/gap_fill.py): a sparse scan's flat gaps closed, rims left where they are."""
+
+import numpy as np
+import pytest
+
+from engine.field import compute_udf_band
+from engine.meshing import MeshingSettings, extract_surface
+from engine.settings import ReconstructSettings
+
+WIDTH, DEPTH, LINE_GAP = 1.0, 0.64, 0.08  # a flat strip scanned along lines 10 spacings apart
+
+
+def _line_scan(tilt: float = 0.3) -> np.ndarray:
+    """A flat rectangle WIDTH x DEPTH scanned in lines along x, LINE_GAP apart, tilted about x."""
+    x = np.linspace(0.0, WIDTH, 250)
+    y = np.arange(0.0, DEPTH + 1e-9, LINE_GAP)
+    xx, yy = np.meshgrid(x, y, indexing="ij")
+    points = np.stack([xx.ravel(), yy.ravel() * np.cos(tilt), yy.ravel() * np.sin(tilt)], axis=1)
+    return points + np.array([0.0, 0.01, 0.02])
+
+
+def _area(mesh) -> float:
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
+                                axis=1).sum()
+
+
+def _mesh(points: np.ndarray, fill: bool):
+    settings = ReconstructSettings(resolution=128, fill_gaps=fill)
+    band = compute_udf_band(points, settings, udf_source="nearest")
+    return band, extract_surface(band.grid, MeshingSettings(device="cpu")).mesh
+
+
+@pytest.fixture(scope="module")
+def scanned_strip():
+    points = _line_scan()
+    return points, _mesh(points, False), _mesh(points, True)
+
+
+def test_gaps_between_scan_lines_are_closed(scanned_strip):
+    _, (_, holed), (band, filled) = scanned_strip
+    true_area = WIDTH * DEPTH
+    assert band.stats["gap_nodes"] > 0
+    assert _area(holed) < 0.8 * true_area  # the lines lie farther apart than the band reaches
+    assert _area(filled) > 0.96 * true_area
+
+
+def test_rims_do_not_grow(scanned_strip):
+    """Past the strip's edges every point lies on one side: nothing is filled there."""
+    points, _, (_, filled) = scanned_strip
+    assert _area(filled) < 1.03 * WIDTH * DEPTH
+    # every vertex lies over the rectangle, within a voxel and a half of its edges
+    h = 1.0 / 128
+    lo, hi = points.min(axis=0) - 1.5 * h, points.max(axis=0) + 1.5 * h
+    vertices = np.asarray(filled.vertices)
+    assert np.all((vertices >= lo) & (vertices <= hi))
+
+
+def test_a_dense_cloud_is_left_as_it_is():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.0, 1.0, (20000, 3)) * np.array([1.0, 1.0, 0.0])  # a dense square
+    plain = compute_udf_band(points, ReconstructSettings(resolution=64), udf_source="nearest")
+    filled = compute_udf_band(points, ReconstructSettings(resolution=64, fill_gaps=True),
+                              udf_source="nearest")
+    assert filled.stats["gap_nodes"] == 0
+    a, b = plain.grid.band(), filled.grid.band()
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_filling_repeats_exactly():
+    points = _line_scan(0.5)[::2]
+    settings = ReconstructSettings(resolution=96, fill_gaps=True)
+    first = compute_udf_band(points, settings, udf_source="nearest").grid.band()
+    second = compute_udf_band(points, settings, udf_source="nearest").grid.band()
+    assert first[0].tobytes() == second[0].tobytes() and first[1].tobytes() == second[1].tobytes()
