@@ -293,7 +293,8 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     if settings.fill_gaps:
         progress(0.95, "filling the gaps of a sparse scan")
         indices, values, stats["gap_nodes"] = fill_gaps(
-            tree, points, shape, origin, spacing, indices, values)
+            tree, points, shape, origin, spacing, indices, values,
+            origin if anchor is None else np.asarray(anchor, dtype=np.float64))
     stats["seconds_udf"] = time.perf_counter() - started
     # the radius lattice's time, then the policy's share of the batches' time
     lattice_seconds = stats.pop("lattice_seconds", 0.0)

@@ -46,8 +46,8 @@ CHUNK = 65536
 
 
 def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.ndarray,
-              spacing: float, indices: np.ndarray,
-              values: np.ndarray) -> Tuple[np.ndarray, np.ndarray, int]:
+              spacing: float, indices: np.ndarray, values: np.ndarray,
+              lattice_origin: np.ndarray = None) -> Tuple[np.ndarray, np.ndarray, int]:
     """The band with the gaps of a sparse scan filled (see the module docstring).
 
     Parameters
@@ -56,6 +56,8 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     points : (N, 3) float64, the grid's frame
     shape, origin, spacing : the grid
     indices : (M, 3) int64 band nodes; values : (M,) float32 their distances
+    lattice_origin : where the thinned cloud's cubes start (default ``origin``): the tiles of
+        one reconstruction pass the same point, so that they thin their points alike
 
     Returns
     -------
@@ -86,7 +88,8 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     nodes, positions = nodes[near_plane], positions[near_plane]
     # the full test reads a thinned cloud, so that the nearest points of a node between two
     # scan lines come from both, not all from the nearer line's closely spaced points
-    thinned = _thinned(points, THIN_NODES * spacing)
+    start = origin if lattice_origin is None else lattice_origin
+    thinned = _thinned(points, THIN_NODES * spacing, np.asarray(start, dtype=np.float64))
     thin_tree = cKDTree(thinned)
     distance = np.full(len(nodes), np.inf)
     for start in range(0, len(nodes), CHUNK):
@@ -112,9 +115,10 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     return indices, values, int(lower.sum() + (~held).sum())
 
 
-def _thinned(points: np.ndarray, cell: float) -> np.ndarray:
-    """The first point of each occupied cube of side ``cell`` (in the points' order)."""
-    keys = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+def _thinned(points: np.ndarray, cell: float, start: np.ndarray) -> np.ndarray:
+    """The first point (in the points' order) of each occupied cube of side ``cell`` of the
+    lattice through ``start``."""
+    keys = np.floor((points - start) / cell).astype(np.int64)
     _, first = np.unique(keys, axis=0, return_index=True)
     return points[np.sort(first)]
 

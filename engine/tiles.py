@@ -470,12 +470,17 @@ def tile_size(detail, settings) -> int:
 
 def tile_reach(settings, spacing: float) -> float:
     """How far beyond a tile's core its points must reach: the mesher's halo plus the widest
-    ball any node of the halo may read (a sparse ball widened to its last factor)."""
+    ball any node of the halo may read (a sparse ball widened to its last factor), or, when
+    gaps are filled, the farthest point a filled node's tests read (:mod:`.gap_fill`)."""
     from .field import MIN_BAND_NODES, SPARSE_WIDENING
+    from .gap_fill import EDGE_NODES, GAP_NODES, THIN_NODES
     from .radius import max_radius
 
     ball = max(max_radius(settings), MIN_BAND_NODES * spacing)
-    return HALO_CELLS * spacing + SPARSE_WIDENING[-1] * ball + spacing
+    reach = SPARSE_WIDENING[-1] * ball
+    if settings.fill_gaps:  # an edge point, its own neighbours, a thinned cube across
+        reach = max(reach, (2.0 * GAP_NODES + EDGE_NODES + 2.0 * THIN_NODES) * spacing)
+    return HALO_CELLS * spacing + reach + spacing
 
 
 def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, meshing,

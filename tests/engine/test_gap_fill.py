@@ -73,3 +73,16 @@ def test_filling_repeats_exactly():
     first = compute_udf_band(points, settings, udf_source="nearest").grid.band()
     second = compute_udf_band(points, settings, udf_source="nearest").grid.band()
     assert first[0].tobytes() == second[0].tobytes() and first[1].tobytes() == second[1].tobytes()
+
+
+def test_tiles_fill_the_gaps_as_one_grid_does():
+    from engine.reconstruct import reconstruct
+
+    points = _line_scan()
+    settings = dict(resolution=128, fill_gaps=True, outliers="keep", workers=1)
+    whole = reconstruct(points, ReconstructSettings(**settings), udf_source="nearest").mesh
+    tiled = reconstruct(points, ReconstructSettings(tile_cells=48, **settings),
+                        udf_source="nearest").mesh
+    area = WIDTH * DEPTH
+    assert _area(whole) > 0.96 * area
+    assert _area(tiled) == pytest.approx(_area(whole), rel=0.02)
