@@ -22,8 +22,8 @@ their ``NEIGHBOURS`` nearest points when
 A node the band already holds takes its plane distance only where that is ``LOWER_NODES``
 spacings below its value: between the lines of a scan, where the network and the nearest-point
 distance see a line, not the plane, and not over a densely sampled surface, where they agree
-with it. Every
-step is a k-d query or per-node arithmetic, so the field stays the same run after run.
+with it. Every step is a k-d query or per-node arithmetic, so the field stays the same run after
+run.
 """
 
 import math
@@ -75,16 +75,16 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     if not edge.any():
         return indices, values, 0
     reach = GAP_NODES * spacing
+    # the nodes near an edge point (find_band dilates from those) and their distance to the
+    # nearest of all points
     nodes, nearest = find_band(tree, points[edge], shape, origin, spacing, reach)
-    # find_band measured the distance to the edge points only; every point counts
-    far = nearest > skip_within
-    nodes = nodes[far]
+    nodes = nodes[nearest > skip_within]
     positions = origin + nodes * spacing
-    nearest, owner = tree.query(positions, k=1, workers=-1)
+    _, owner = tree.query(positions, k=1, workers=-1)
     # a quick test before the full one: off the plane of the nearest point, where that plane
     # is known (on a scan line the nearest point's neighbours are collinear: no plane)
     offset = np.einsum("ij,ij->i", positions - points[owner], normals[owner])
-    near_plane = (nearest > skip_within) & (~spread[owner] | (np.abs(offset) < IN_PLANE * spacing))
+    near_plane = ~spread[owner] | (np.abs(offset) < IN_PLANE * spacing)
     nodes, positions = nodes[near_plane], positions[near_plane]
     # the full test reads a thinned cloud, so that the nearest points of a node between two
     # scan lines come from both, not all from the nearer line's closely spaced points
