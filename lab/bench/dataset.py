@@ -166,8 +166,11 @@ def crop_to_input(mesh: Mesh, points: np.ndarray, max_dist: float = 0.01,
     scan. The split makes the crop follow the scan's own edge to within ``max_dist / 2`` whatever
     the mesh's cells (rooms: 8 cm cells, 0.013-0.023 in the unit frame). With ``normals`` (the
     scan's, one per point) only points of the face's own surface count, ``|cos| > 0.7`` between
-    the point's normal and the face's: the floor hidden under a cabinet, within ``max_dist`` of
-    the cabinet's seen sides, is no surface the scan saw. Unused vertices are dropped.
+    the point's normal and the face's, and the point lies in the face's plane, within
+    ``max_dist / 4`` of it: the floor hidden under a cabinet, within ``max_dist`` of the
+    cabinet's seen sides, and the underside of a board or a mattress lying on another, within
+    ``max_dist`` of its seen top and facing the same way, are no surface the scan saw. Unused
+    vertices are dropped.
 
     Parameters
     ----------
@@ -193,13 +196,15 @@ def crop_to_input(mesh: Mesh, points: np.ndarray, max_dist: float = 0.01,
 
 
 _SAME_SURFACE_COS = 0.7
+_SAME_SURFACE_OFFSET = 0.25  # of max_dist: a scan point's distance from the face's plane
 _SAME_SURFACE_NEIGHBOURS = 8
 
 
 def _near(v: np.ndarray, f: np.ndarray, tree, max_dist: float,
           normals: np.ndarray = None) -> np.ndarray:
     """Per face: one of its corners, edge midpoints or centroid lies within ``max_dist`` of a
-    point (with ``normals``: of one of the 8 nearest points whose normal is the face's)."""
+    point (with ``normals``: of one of the 8 nearest points whose normal is the face's and which
+    lies in the face's plane)."""
     if len(f) == 0:
         return np.zeros(0, bool)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
@@ -217,8 +222,10 @@ def _near(v: np.ndarray, f: np.ndarray, tree, max_dist: float,
     face_normal = np.cross(b - a, c - a)[maybe]
     face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
     found = dist.reshape(-1, 7, k) <= max_dist
-    point_normal = normals[np.where(found, idx.reshape(-1, 7, k), 0)]
-    same = np.abs(np.einsum("fpkc,fc->fpk", point_normal, face_normal)) > _SAME_SURFACE_COS
+    nearest = np.where(found, idx.reshape(-1, 7, k), 0)
+    same = np.abs(np.einsum("fpkc,fc->fpk", normals[nearest], face_normal)) > _SAME_SURFACE_COS
+    offset = np.einsum("fpkc,fc->fpk", tree.data[nearest] - a[maybe, None, None], face_normal)
+    same &= np.abs(offset) < _SAME_SURFACE_OFFSET * max_dist
     keep[maybe] = (found & same).any(axis=(1, 2))
     return keep
 

@@ -242,7 +242,8 @@ def _protocol(samples: int, seed: int, domain: str, cropped: bool, crop_max_dist
                 f"sampling seed {seed}")
     if cropped:
         protocol += (f"; GT and prediction cropped to faces within {crop_max_dist} of the clean "
-                     f"scan (GT: facing as the scan's normals; dataset.crop_to_input)")
+                     f"scan (GT: facing as the scan's normals and in the plane of its points; "
+                     f"dataset.crop_to_input)")
     elif domain in CROP_DOMAINS:
         protocol += "; no crop (dataset has no crop_to_input): unseen GT faces count as missed"
     return protocol

@@ -237,3 +237,19 @@ def test_crop_with_normals_leaves_out_the_surface_hidden_beside_a_seen_one():
     assert _area(blind) >= 0.015  # a strip of about 2 x 0.01 along the foot
     seen = crop_to_input(_square(), points, 0.01, normals)
     assert len(seen.faces) == 0
+
+
+def test_crop_with_normals_leaves_out_a_sheet_hidden_under_a_seen_one():
+    """A board lies 0.007 above the floor, both facing +z; the scan saw the board's top only.
+    The floor under it is within max_dist of the scan and faces as it does, but no scan point
+    lies in its plane: it is not seen."""
+    rng = np.random.default_rng(2)
+    points = np.column_stack([rng.uniform(0, 1, 20000), rng.uniform(0, 1, 20000),
+                              np.full(20000, 0.007)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    board = Mesh(_square().vertices + [0.0, 0.0, 0.007], _square().faces)
+    both = Mesh(np.vstack([_square().vertices, board.vertices]),
+                np.vstack([_square().faces, board.faces + 4]))
+    crop = crop_to_input(both, points, 0.01, normals)
+    assert _area(crop) == pytest.approx(_area(crop_to_input(board, points, 0.01, normals)))
+    assert _area(crop) > 0.99 and np.allclose(crop.vertices[:, 2], 0.007)
