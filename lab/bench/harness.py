@@ -44,6 +44,7 @@ import platform
 import resource
 import sys
 import time
+from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
@@ -157,7 +158,7 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
                   dataset=None, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
                   pass_ground_truth: bool = False, jobs: int = 1,
                   method_factory: Optional[Callable[[], Callable]] = None,
-                  earlier: Optional[dict] = None) -> dict:
+                  earlier: Optional[dict] = None, meshes: Optional[str] = None) -> dict:
     """Run ``method`` on the first ``count`` test shapes of ``domain`` under ``condition``.
 
     Parameters
@@ -190,6 +191,8 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
         the others) and only the missing ones among the first ``count`` run, so a long benchmark
         can be extended or finished in several sittings. A result of another method or protocol
         raises ``ValueError``.
+    meshes : a folder where each predicted mesh is saved (:func:`mesh_file`), so that
+        :func:`rescore` can score it again under another protocol without running the method
 
     Returns
     -------
@@ -209,7 +212,8 @@ def run_benchmark(method: Callable[[PointCloud], Mesh], domain: str, condition: 
     protocol = _protocol(samples, seed, domain, crop is not None, crop_max_dist)
     kept = _rows_to_keep(earlier, name, domain, condition, samples, seed, protocol)
     tasks = [(shape_seed, domain, condition, samples, seed, crop is not None,
-              crop_max_dist, pass_ground_truth)
+              crop_max_dist, pass_ground_truth,
+              None if meshes is None else mesh_file(meshes, name, domain, condition, shape_seed))
              for shape_seed in shape_seeds if shape_seed not in kept]
     label = f"{name} {domain}/{condition}"
     new_rows: List[dict] = []
@@ -266,8 +270,9 @@ def _rows_to_keep(earlier: Optional[dict], name: str, domain: str, condition: st
 
 def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, condition: str,
                samples: int, seed: int, cropped: bool, crop_max_dist: float,
-               pass_ground_truth: bool):
-    """Build one shape's ground truth and input, run ``method`` on it, score it.
+               pass_ground_truth: bool, mesh_path: Optional[Path] = None):
+    """Build one shape's ground truth and input, run ``method`` on it, score it (and save the
+    mesh to ``mesh_path``).
 
     Returns ``(row, memory_measure)``: the row of :func:`run_benchmark`'s ``shapes``.
     """
@@ -291,10 +296,71 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
     if pred is None:
         row.update(_worst_scores(), empty=True, pred_faces=0)
     else:
-        scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible)
-        row.update({key: scores[key] for key in METRIC_KEYS + LAYER_KEYS},
-                   empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
+        if mesh_path is not None:
+            save_mesh(pred, mesh_path)
+        row.update(_scores(pred, gt, samples, seed, crop, crop_max_dist, visible))
     return row, memory.measure
+
+
+def _scores(pred: Mesh, gt: Mesh, samples: int, seed: int, crop, crop_max_dist: float,
+            visible) -> dict:
+    """The metric and layer keys of a row, ``empty`` and ``pred_faces``."""
+    scores = _score(pred, gt, samples, seed, crop, crop_max_dist, visible)
+    row = {key: scores[key] for key in METRIC_KEYS + LAYER_KEYS}
+    row.update(empty=bool(scores["empty"]), pred_faces=int(scores["pred_faces"]))
+    return row
+
+
+# --------------------------------------------------------------------------------------------
+# Saved meshes: score a run again under another protocol without running the method
+
+
+def mesh_file(folder, name: str, domain: str, condition: str, shape_seed: int) -> Path:
+    """Where the mesh of one shape of a run is saved."""
+    return Path(folder) / f"{name}_{domain}_{condition}_{int(shape_seed)}.npz"
+
+
+def save_mesh(mesh: Mesh, path: Path) -> None:
+    """Write ``mesh`` (float64 vertices, int64 faces, compressed) through a temporary file, so
+    that an interrupted run leaves no half-written mesh."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "wb") as handle:
+        np.savez_compressed(handle, vertices=np.asarray(mesh.vertices, np.float64),
+                            faces=np.asarray(mesh.faces, np.int64).reshape(-1, 3))
+    os.replace(partial, path)
+
+
+def rescore(earlier: dict, meshes, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
+            dataset=None, progress=None) -> dict:
+    """``earlier`` (a result of :func:`run_benchmark`) scored again under today's protocol from
+    the meshes its run saved in ``meshes``; times, memory and failures are kept as they were.
+
+    Raises ``FileNotFoundError`` naming a shape whose mesh was not saved.
+    """
+    dataset = dataset or _default_dataset()
+    name, domain, condition = earlier["method"], earlier["domain"], earlier["condition"]
+    samples, seed = earlier["samples"], earlier["seed"]
+    crop = getattr(dataset, "crop_to_input", None) if domain in CROP_DOMAINS else None
+    rows = []
+    for index, old in enumerate(earlier["shapes"]):
+        if progress is not None:
+            progress(index / len(earlier["shapes"]), f"rescoring {name} {domain}/{condition}")
+        row = dict(old)
+        if not (old["failed"] or old["empty"]):
+            path = mesh_file(meshes, name, domain, condition, old["shape_seed"])
+            if not path.exists():
+                raise FileNotFoundError(f"no saved mesh for shape {old['shape_seed']} of "
+                                        f"{name} {domain}/{condition}: {path}")
+            with np.load(path) as saved:
+                pred = Mesh(saved["vertices"], saved["faces"])
+            gt = dataset.make_shape(domain, old["shape_seed"])
+            visible = dataset.make_input(gt, domain, "clean", old["shape_seed"]) if crop else None
+            row.update(_scores(pred, gt, samples, seed, crop, crop_max_dist, visible))
+        rows.append(row)
+    protocol = _protocol(samples, seed, domain, crop is not None, crop_max_dist)
+    return {**earlier, "protocol": protocol, "shapes": rows, "summary": summarize(rows)}
 
 
 # One thread per worker process (numpy's BLAS and torch both read these at start): a pool of

@@ -237,6 +237,12 @@ def test_cli_prints_a_table_and_writes_json(tmp_path, monkeypatch, capsys):
     code = main(["bench", "--method", "toy", "--domain", "garments", "--condition", "clean",
                  "--out", str(tmp_path), "--report"])
     assert code == 0 and capsys.readouterr().out == out
+    # --rescore needs the meshes the run saved: none were, so it rewrites nothing
+    before = (tmp_path / "toy_garments_clean.json").read_text()
+    code = main(["bench", "--rescore", "--domain", "garments", "--condition", "clean",
+                 "--out", str(tmp_path), "--meshes", str(tmp_path / "meshes")])
+    assert code == 1 and "no saved mesh" in capsys.readouterr().err
+    assert (tmp_path / "toy_garments_clean.json").read_text() == before
 
 
 def test_table_one_reports_missing_modes():
@@ -526,3 +532,33 @@ def test_cli_resume_extends_the_json(tmp_path, monkeypatch, capsys):
     assert "| cars | clean | 2 | 0 |" in capsys.readouterr().out
     saved = json.loads((tmp_path / "toy_cars_clean.json").read_text())
     assert [row["shape_seed"] for row in saved["shapes"]] == [0, 1]
+
+
+def test_saved_meshes_are_scored_again_under_a_new_crop_without_running_the_method(tmp_path):
+    """A run saves its meshes; rescoring them under another crop gives what a fresh run under
+    that crop gives, keeps the run's times, and a missing mesh is named, not guessed."""
+    calls = []
+
+    def squashed(cloud):  # the cloud's ellipsoid, a little too flat: scores a crop can move
+        calls.append(1)
+        mesh = sphere()
+        half = np.ptp(cloud.points, axis=0) / 2
+        return Mesh(mesh.vertices * 2 * half * np.array([1.0, 1.0, 0.9]), mesh.faces)
+
+    old = run(squashed, count=1, domain="rooms", dataset=fake_dataset(crop=True),
+              meshes=tmp_path, crop_max_dist=0.1)
+    assert len(calls) == 1 and len(list(tmp_path.glob("*.npz"))) == 1
+    narrower = fake_dataset(crop=True)
+    wide_crop = narrower.crop_to_input
+    narrower.crop_to_input = lambda mesh, points, max_dist, normals=None: wide_crop(
+        mesh, points[points[:, 2] > 0], max_dist, normals)  # what the upper half saw
+    again = harness.rescore(old, tmp_path, crop_max_dist=0.1, dataset=narrower)
+    fresh = run(squashed, count=1, domain="rooms", dataset=narrower, crop_max_dist=0.1)
+    assert len(calls) == 2  # the rescoring ran nothing
+    for before, after, expected in zip(old["shapes"], again["shapes"], fresh["shapes"]):
+        assert after["seconds"] == before["seconds"] and after["run_at"] == before["run_at"]
+        assert all(after[key] == expected[key] for key in METRIC_KEYS)
+        assert after["cd_l1_x100"] != before["cd_l1_x100"]
+    (tmp_path / "squashed_rooms_clean_0.npz").unlink()
+    with pytest.raises(FileNotFoundError, match="shape 0 of squashed rooms/clean"):
+        harness.rescore(old, tmp_path, crop_max_dist=0.1, dataset=narrower)
