@@ -86,3 +86,19 @@ def test_tiles_fill_the_gaps_as_one_grid_does():
     area = WIDTH * DEPTH
     assert _area(whole) > 0.96 * area
     assert _area(tiled) == pytest.approx(_area(whole), rel=0.02)
+
+
+def test_a_scan_with_gaps_is_told_that_the_fill_would_close_them():
+    """The message names the option where the balls had to reach past the lines, and only
+    while it is off; a densely sampled surface gets no such message."""
+    from engine.reconstruct import reconstruct
+
+    def told(points, fill):
+        result = reconstruct(points, ReconstructSettings(resolution=128, device="cpu",
+                                                         fill_gaps=fill))
+        return any("Fill Gaps" in message for message in result.messages)
+
+    assert told(_line_scan(), False) and not told(_line_scan(), True)
+    rng = np.random.default_rng(0)
+    dense = rng.uniform(0.0, 1.0, (20000, 3)) * np.array([1.0, 1.0, 0.0])
+    assert not told(dense, False)
