@@ -63,6 +63,7 @@ def sentence(text: str) -> str:
 _OUTLIERS = re.compile(r"dropped ([\d,]+) isolated points \(([\d.]+) %\)")
 _KEPT = re.compile(r"kept ([\d,]+) isolated points \(([\d.]+) %\)")
 _SPARSE = re.compile(r"the balls hold only ([\d.]+) points")
+_GAPS = re.compile(r"the scan has gaps wider than the ball in places \((\d+) %")
 
 
 def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = False) -> list:
@@ -90,4 +91,10 @@ def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = Fals
         if match:
             notices.append(f"The points are sparse for this radius (about {match.group(1)} "
                            f"around each spot). If the mesh has holes, raise {radius}.")
+            continue
+        match = _GAPS.search(message)
+        if match:
+            notices.append(f"The scan has gaps wider than the ball around {match.group(1)} % of "
+                           f"the spots looked at. To bridge the flat ones, turn on Advanced > "
+                           f"Fill Gaps.")
     return notices

@@ -394,18 +394,23 @@ def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
              "the balls hold only 3.2 points on average; for a cloud this sparse, raise the "
              "radius",
              "kept 20 isolated points (0.25 %): too few to be outliers; set outliers to 'drop' "
-             "to remove them"] + MESHER_JARGON
+             "to remove them",
+             "the scan has gaps wider than the ball in places (17 % of the distance queries had "
+             "to look farther for points); turn on Fill Gaps (--fill-gaps) to carry flat "
+             "surfaces across them"] + MESHER_JARGON
     quick.udf_reconstruction.radius_mode = "learned"
     reconstruct, job = finished_job(extension, quick, notes)
     reports = Reports()
     reconstruct.finish_job(reports, bpy.context, job)
     warnings = [message for kind, message in reports.messages if kind == {'WARNING'}]
-    assert len(warnings) == 3, warnings
+    assert len(warnings) == 4, warnings
     assert "Dropped 1,234 stray points (2.5 %)" in warnings[0]
     assert "Advanced > Outliers to Keep" in warnings[0]
     assert "raise Largest Radius (turn on Custom Range)" in warnings[1]
     assert "Kept 20 stray-looking points (0.25 %)" in warnings[2]
     assert "Advanced > Outliers to Drop" in warnings[2]
+    assert "gaps wider than the ball around 17 %" in warnings[3]
+    assert "Advanced > Fill Gaps" in warnings[3]
     for _, message in reports.messages:
         assert message[0].isupper() and message.endswith("."), message
 
