@@ -273,7 +273,8 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     seconds_band = time.perf_counter() - started
     stats = {"grid_shape": shape, "spacing": spacing, "band_radius": band_radius,
              "band_nodes": int(len(indices)), "udf_source": udf_source, "device": "none",
-             "sparse_balls": 0, "mean_patch_points": 0.0, "seconds_band": seconds_band}
+             "sparse_balls": 0, "widened_balls": 0, "mean_patch_points": 0.0,
+             "seconds_band": seconds_band}
     progress(0.1, f"query band: {len(indices):,} grid nodes")
 
     started = time.perf_counter()

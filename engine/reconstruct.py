@@ -202,8 +202,9 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     if udf_source == "network" and 0 < field_stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {field_stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
-    widened = field_stats.get("widened_balls", 0) / max(field_stats.get("network_queries", 0), 1)
-    if udf_source == "network" and not settings.fill_gaps and widened >= GAPPY_SHARE:
+    widened = (field_stats["widened_balls"] / max(field_stats["network_queries"], 1)
+               if udf_source == "network" else 0.0)  # only the network widens balls
+    if widened >= GAPPY_SHARE and not settings.fill_gaps:
         messages.append(f"the scan has gaps wider than the ball in places ({100 * widened:.0f} % "
                         f"of the distance queries had to look farther for points); turn on Fill "
                         f"Gaps (--fill-gaps) to carry flat surfaces across them")

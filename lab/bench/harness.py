@@ -278,8 +278,7 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
     """
     gt = dataset.make_shape(domain, shape_seed)
     cloud = PointCloud(np.asarray(dataset.make_input(gt, domain, condition, shape_seed).points))
-    crop = dataset.crop_to_input if cropped else None
-    visible = dataset.make_input(gt, domain, "clean", shape_seed) if cropped else None
+    crop, visible = _scored_region(dataset, gt, domain, shape_seed, cropped)
     row = {"shape_seed": int(shape_seed), "points": len(cloud), "failed": False, "error": None,
            "run_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     pred = None
@@ -300,6 +299,13 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
             save_mesh(pred, mesh_path)
         row.update(_scores(pred, gt, samples, seed, crop, crop_max_dist, visible))
     return row, memory.measure
+
+
+def _scored_region(dataset, gt: Mesh, domain: str, shape_seed: int, cropped: bool):
+    """The crop and the clean scan it crops to (``(None, None)`` for an uncropped domain)."""
+    if not cropped:
+        return None, None
+    return dataset.crop_to_input, dataset.make_input(gt, domain, "clean", shape_seed)
 
 
 def _scores(pred: Mesh, gt: Mesh, samples: int, seed: int, crop, crop_max_dist: float,
@@ -342,7 +348,7 @@ def rescore(earlier: dict, meshes, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
     dataset = dataset or _default_dataset()
     name, domain, condition = earlier["method"], earlier["domain"], earlier["condition"]
     samples, seed = earlier["samples"], earlier["seed"]
-    crop = getattr(dataset, "crop_to_input", None) if domain in CROP_DOMAINS else None
+    cropped = domain in CROP_DOMAINS and hasattr(dataset, "crop_to_input")
     rows = []
     for index, old in enumerate(earlier["shapes"]):
         if progress is not None:
@@ -356,10 +362,10 @@ def rescore(earlier: dict, meshes, crop_max_dist: float = DEFAULT_CROP_MAX_DIST,
             with np.load(path) as saved:
                 pred = Mesh(saved["vertices"], saved["faces"])
             gt = dataset.make_shape(domain, old["shape_seed"])
-            visible = dataset.make_input(gt, domain, "clean", old["shape_seed"]) if crop else None
+            crop, visible = _scored_region(dataset, gt, domain, old["shape_seed"], cropped)
             row.update(_scores(pred, gt, samples, seed, crop, crop_max_dist, visible))
         rows.append(row)
-    protocol = _protocol(samples, seed, domain, crop is not None, crop_max_dist)
+    protocol = _protocol(samples, seed, domain, cropped, crop_max_dist)
     return {**earlier, "protocol": protocol, "shapes": rows, "summary": summarize(rows)}
 
 
