@@ -45,7 +45,8 @@ def main(argv=None) -> None:
     points = dataset.make_input(truth, args.domain, args.condition, args.seed).points
     frame = UnitFrame.from_points(points)
     unit = frame.to_unit(points)
-    grid = compute_udf_band(unit, ReconstructSettings(resolution=args.resolution)).grid
+    grid = compute_udf_band(unit, ReconstructSettings(resolution=args.resolution,
+                                                      fill_gaps=False)).grid
     nodes, field = grid.band()
     where = grid.index_to_world(nodes)
     nearest, _ = cKDTree(unit).query(where, workers=-1)

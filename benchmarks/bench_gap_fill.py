@@ -46,7 +46,8 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---:|")
     for name, points in clouds(args.count):
         points = UnitFrame.from_points(points).to_unit(points)
-        band = compute_udf_band(points, ReconstructSettings(resolution=args.resolution),
+        band = compute_udf_band(points, ReconstructSettings(resolution=args.resolution,
+                                                            fill_gaps=False),
                                 udf_source="nearest")
         grid = band.grid
         indices, values = grid.band()

@@ -72,6 +72,7 @@ def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mod
             "faces": stats["faces"], "device": stats["device"], "udf_source": udf_source,
             "network_queries": stats.get("network_queries", 0),
             "radius_s": stats.get("seconds_radius", 0.0),
+            "gap_fill_s": stats.get("seconds_gap_fill", 0.0), "gap_nodes": stats.get("gap_nodes", 0),
             "parent_s": stats.get("seconds_parent_ball", 0.0),
             "lattice_step": stats.get("lattice_step", 1),
             "lattice_positions": stats.get("lattice_positions", 0),
@@ -277,11 +278,13 @@ def main(argv=None) -> int:
         totals.append((resolution, row["total"]))
         floors.append((resolution, row["network_queries"] * row["macs_per_query"]))
         queries = max(row["network_queries"], 1)
-        rest = max(row["udf"] - row["radius_s"], 1e-9)
-        details.append(f"{resolution:>4} field: {row['network_queries']:,} network queries, "
-                       f"{1e6 * row['udf'] / queries:.1f} us per query "
+        network = row["udf"] - row["gap_fill_s"]
+        rest = max(network - row["radius_s"], 1e-9)
+        details.append(f"{resolution:>4} field: gap fill {row['gap_fill_s']:.2f} s "
+                       f"({row['gap_nodes']:,} nodes set); {row['network_queries']:,} network "
+                       f"queries, {1e6 * network / queries:.1f} us per query "
                        f"({1e6 * row['field_cpu_s'] / queries:.1f} us of process time per query "
-                       f"with the band, all threads), of which radius policy "
+                       f"with the band and gap fill, all threads), of which radius policy "
                        f"{1e6 * row['radius_s'] / queries:.1f} us: it adds "
                        f"{100 * row['radius_s'] / rest:.0f}% to the rest of the field's time "
                        + _policy_detail(row, queries, rest))

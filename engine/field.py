@@ -104,7 +104,8 @@ class BandField:
         neighbour search: ``seconds_udf`` times the radius policy's share of the batches'
         time, as the batches run on several threads at once), ``seconds_parent_ball`` (the
         part of ``seconds_radius`` spent on the parent ball's neighbour search, whose lists
-        also give the backbone its patches).
+        also give the backbone its patches), ``gap_nodes`` and ``seconds_gap_fill`` (the nodes
+        the gap fill set and its part of ``seconds_udf``).
     """
 
     grid: UDFGrid
@@ -290,12 +291,14 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
                                        stats, (nodes, lattice_origin, spacing))
     else:
         values = nearest.astype(np.float32)
-    stats["gap_nodes"] = 0
+    stats["gap_nodes"], stats["seconds_gap_fill"] = 0, 0.0
     if settings.fill_gaps:
         progress(0.95, "filling the gaps of a sparse scan")
+        filling = time.perf_counter()
         indices, values, stats["gap_nodes"] = fill_gaps(
             tree, points, shape, origin, spacing, indices, values,
             origin if anchor is None else np.asarray(anchor, dtype=np.float64))
+        stats["seconds_gap_fill"] = time.perf_counter() - filling
     stats["seconds_udf"] = time.perf_counter() - started
     # the radius lattice's time, then the policy's share of the batches' time
     lattice_seconds = stats.pop("lattice_seconds", 0.0)

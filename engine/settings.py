@@ -266,11 +266,13 @@ class ReconstructSettings:
              "that of the points around it (lower finds more)",
         low=1.5, high=20, step=10, precision=1)
     fill_gaps: bool = setting(
-        False, "Fill Gaps",
+        True, "Fill Gaps",
         "Carry flat surfaces across gaps between the points of a sparse scan that are wider "
-        "than the ball radius (rims, where the points lie on one side only, stay open)",
-        help="carry flat surfaces across the gaps of a sparse scan wider than the ball radius "
-             "(open rims stay open)")
+        "than the ball radius (rims, where the points lie on one side only, stay open; a hole "
+        "in a flat surface narrower than about 24 grid cells is closed too)",
+        help="carry flat surfaces across the gaps of a sparse scan wider than the ball radius; "
+             "open rims stay open, holes in a flat surface narrower than about 24 grid cells "
+             "close (--no-fill-gaps keeps them)")
     udf_source: str = setting(
         "network", "Distances",
         "Where the distances to the surface come from: the network, or the nearest point (a "

@@ -110,7 +110,7 @@ def _reconstruct_function():
 
 
 def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "auto",
-              udf_source: str = None, **settings) -> Method:
+              udf_source: str = None, fill_gaps: bool = False, **settings) -> Method:
     """Our reconstruction: :func:`engine.reconstruct.reconstruct` with the given settings.
 
     Parameters
@@ -119,6 +119,8 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
     resolution : grid cells along the longest side of the bounding box
     device : ``auto``, ``cpu`` or ``cuda``
     udf_source : None (the engine's default, the network) or ``"nearest"``
+    fill_gaps : the engine's gap fill; off unless asked for (the engine's default is on), so
+        that a result's name (``-gaps``) says which it is
     **settings : further :class:`engine.settings.ReconstructSettings` fields
 
     Returns
@@ -139,7 +141,7 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
 
     reconstruct = _reconstruct_function()
     config = ReconstructSettings(radius_mode=radius_mode, resolution=resolution, device=device,
-                                 **settings).validate()
+                                 fill_gaps=fill_gaps, **settings).validate()
     if radius_mode != "fixed":
         _check_radius_mode(config)
     options = {}

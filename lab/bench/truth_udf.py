@@ -58,7 +58,8 @@ def _edge_faces(topo, faces: np.ndarray) -> np.ndarray:
     return owner
 
 
-def make_truth_udf(resolution: int = 256, device: str = "auto", **settings):
+def make_truth_udf(resolution: int = 256, device: str = "auto", fill_gaps: bool = False,
+                   **settings):
     """The method ``(cloud, ground truth) -> Mesh``: the band and mesher of ``ours`` (fixed
     radius) on the truth's distances."""
     from engine.field import compute_udf_band
@@ -70,7 +71,7 @@ def make_truth_udf(resolution: int = 256, device: str = "auto", **settings):
     from engine.udf_grid import UDFGrid
 
     config = ReconstructSettings(radius_mode="fixed", resolution=resolution, device=device,
-                                 **settings).validate()
+                                 fill_gaps=fill_gaps, **settings).validate()
 
     def truth_udf(cloud: PointCloud, gt: Mesh) -> Mesh:
         points = validate_points(cloud.points)
