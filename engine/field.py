@@ -153,8 +153,8 @@ def grid_layout(points: np.ndarray, resolution: int, band_radius: float,
 
 
 def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.ndarray,
-              spacing: float, band_radius: float,
-              cancel: Optional[CancelFn] = None) -> Tuple[np.ndarray, np.ndarray]:
+              spacing: float, band_radius: float, cancel: Optional[CancelFn] = None,
+              with_owner: bool = False):
     """Every grid node within ``band_radius`` of an input point, and its nearest-point distance.
 
     Parameters
@@ -165,11 +165,13 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     shape, origin, spacing : the grid (see :func:`grid_layout`)
     band_radius : R, unit frame
     cancel : optional cancel check, called between chunks
+    with_owner : also return the index of each node's nearest point in ``tree``
 
     Returns
     -------
     indices : (M, 3) int64 node indices, in C order of the grid
     nearest : (M,) float64 distance from each node to its nearest input point, <= R
+    owner : (M,) int64, with ``with_owner`` only
     """
     from scipy import ndimage
 
@@ -187,13 +189,17 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     bound = float(np.nextafter(band_radius, np.inf))
     keep = np.zeros(len(candidates), dtype=bool)
     nearest = np.empty(len(candidates), dtype=np.float64)
+    owner = np.empty(len(candidates), dtype=np.int64)
     for start in range(0, len(candidates), 4 * QUERY_CHUNK):
         stop = min(start + 4 * QUERY_CHUNK, len(candidates))
         positions = origin + candidates[start:stop] * spacing
-        distance, _ = tree.query(positions, k=1, distance_upper_bound=bound, workers=-1)
+        distance, owner[start:stop] = tree.query(positions, k=1, distance_upper_bound=bound,
+                                                 workers=-1)
         keep[start:stop] = distance <= band_radius
         nearest[start:stop] = distance
         check_cancel(cancel)
+    if with_owner:
+        return candidates[keep], nearest[keep], owner[keep]
     return candidates[keep], nearest[keep]
 
 

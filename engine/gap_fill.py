@@ -75,12 +75,13 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     if not edge.any():
         return indices, values, 0
     reach = GAP_NODES * spacing
-    # the nodes near an edge point (find_band dilates from those) and their distance to the
-    # nearest of all points
-    nodes, nearest = find_band(tree, points[edge], shape, origin, spacing, reach)
-    nodes = nodes[nearest > skip_within]
+    # the nodes near an edge point (find_band dilates from those), their distance to the
+    # nearest of all points and that point
+    nodes, nearest, owner = find_band(tree, points[edge], shape, origin, spacing, reach,
+                                      with_owner=True)
+    away = nearest > skip_within
+    nodes, owner = nodes[away], owner[away]
     positions = origin + nodes * spacing
-    _, owner = tree.query(positions, k=1, workers=-1)
     # a quick test before the full one: off the plane of the nearest point, where that plane
     # is known (on a scan line the nearest point's neighbours are collinear: no plane)
     offset = np.einsum("ij,ij->i", positions - points[owner], normals[owner])
