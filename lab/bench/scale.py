@@ -90,12 +90,18 @@ def run_poisson(folder: Path, depth: int) -> dict:
 
 def child(args) -> None:
     """One method in this (child) process; prints its figures as JSON."""
+    from .harness import _status_kb
+
     folder = Path(args.work)
     if args.child == "ours":
         figures = run_ours(folder, args.voxel_size, args.tile_cells, args.workers)
     else:
         figures = run_poisson(folder, args.poisson_depth)
-    self = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
+    # VmHWM starts afresh at exec; ru_maxrss would carry this process's parent's size at the
+    # fork (the parent holds the floor and its cropped truth)
+    peak_kb = _status_kb("VmHWM")
+    self = (peak_kb if peak_kb is not None
+            else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20
     workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2 ** 20
     print(json.dumps({**figures, "peak_gib": self, "worker_peak_gib": workers}))
 
