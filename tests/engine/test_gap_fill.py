@@ -45,6 +45,15 @@ def test_gaps_between_scan_lines_are_closed(scanned_strip):
     assert _area(filled) > 0.96 * true_area
 
 
+def test_the_default_settings_fill_the_gaps():
+    """A user who changes nothing gets the strip closed: the fill is on by default."""
+    band = compute_udf_band(_line_scan(), ReconstructSettings(resolution=128),
+                            udf_source="nearest")
+    mesh = extract_surface(band.grid, MeshingSettings(device="cpu")).mesh
+    assert band.stats["gap_nodes"] > 0
+    assert _area(mesh) > 0.96 * WIDTH * DEPTH
+
+
 def test_rims_do_not_grow(scanned_strip):
     """Past the strip's edges every point lies on one side: nothing is filled there."""
     points, _, (_, filled) = scanned_strip
