@@ -12,6 +12,7 @@ import re
 # First match wins: a word in the engine's progress message -> the stage shown to the user.
 _STAGES = (
     ("outlier", "Outliers"),
+    ("gaps", "Gap fill"),
     ("preparing", "Preparing"),
     ("band", "Distances"),
     ("udf", "Distances"),
