@@ -621,7 +621,10 @@ def test_a_nan_message_names_the_file(tmp_path):
 
 
 _SLOW_WRITE_CLI = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    # Ctrl-C as in a terminal, even when the suite itself was started in the background
+    # (where a shell without job control starts it, and so this child, ignoring SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.path.insert(0, {root!r})
     import engine.io
     from engine.__main__ import main
