@@ -185,15 +185,15 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
     if outliers:
-        share = 100.0 * outliers / given
         why = (f": they stretched the bounding box {shrink:,.0f} times"
                if settings.outliers == "auto" and outliers < AUTO_SHARE * given else "")
-        messages.insert(0, f"dropped {outliers:,} isolated points ({share:.1f} %) as outliers"
+        messages.insert(0, f"dropped {outliers:,} isolated points ({_share(outliers, given, 1)}) "
+                           f"as outliers"
                            f"{why}; set outliers to 'keep' to use every point")
     elif outliers_found:
-        share = 100.0 * outliers_found / given
         points = "point" if outliers_found == 1 else "points"
-        messages.insert(0, f"kept {outliers_found:,} isolated {points} ({share:.2f} %): too "
+        messages.insert(0, f"kept {outliers_found:,} isolated {points} "
+                           f"({_share(outliers_found, given, 2)}): too "
                            f"few to be outliers; set outliers to 'drop' to remove them")
     if detail.capped:
         messages.append(f"auto detail stops at {AUTO_MAX_CELLS} cells along the longest side "
@@ -247,6 +247,14 @@ def meshing_settings(settings: ReconstructSettings):
 
     return MeshingSettings(seed=settings.seed, min_component_faces=settings.min_component_faces,
                            device=settings.device)
+
+
+def _share(count: int, total: int, digits: int) -> str:
+    """``count`` as a percentage of ``total`` to ``digits`` decimals; a share that would round
+    to zero reads "under 0.01 %" (for two digits), never "0.00 %"."""
+    share = 100.0 * count / total
+    smallest = 10.0 ** -digits
+    return f"under {smallest:.{digits}f} %" if share < smallest else f"{share:.{digits}f} %"
 
 
 def _piece_count(mesh: Mesh) -> int:

@@ -61,10 +61,15 @@ def sentence(text: str) -> str:
     return text
 
 
-_OUTLIERS = re.compile(r"dropped ([\d,]+) isolated points \(([\d.]+) %\)")
-_KEPT = re.compile(r"kept ([\d,]+) isolated points \(([\d.]+) %\)")
+_OUTLIERS = re.compile(r"dropped ([\d,]+) isolated points? \(((?:under )?[\d.]+) %\)")
+_KEPT = re.compile(r"kept ([\d,]+) isolated points? \(((?:under )?[\d.]+) %\)")
 _SPARSE = re.compile(r"the balls hold only ([\d.]+) points")
 _GAPS = re.compile(r"the scan has gaps wider than the ball in places \((\d+) %")
+
+
+def _plural(count: str, noun: str) -> str:
+    """``noun`` or its plural, for a count as the engine wrote it ("1", "1,024")."""
+    return noun if count == "1" else noun + "s"
 
 
 def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = False) -> list:
@@ -80,12 +85,13 @@ def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = Fals
     for message in messages:
         match = _OUTLIERS.search(message)
         if match:
-            notices.append(f"Dropped {match.group(1)} stray points ({match.group(2)} %) before "
-                           f"meshing. To use every point, set Advanced > Outliers to Keep.")
+            notices.append(f"Dropped {match.group(1)} stray {_plural(match.group(1), 'point')} "
+                           f"({match.group(2)} %) before meshing. To use every point, set Advanced > Outliers to Keep.")
             continue
         match = _KEPT.search(message)
         if match:
-            notices.append(f"Kept {match.group(1)} stray-looking points ({match.group(2)} %): "
+            notices.append(f"Kept {match.group(1)} stray-looking "
+                           f"{_plural(match.group(1), 'point')} ({match.group(2)} %): "
                            f"too few to drop. To remove them, set Advanced > Outliers to Drop.")
             continue
         match = _SPARSE.search(message)

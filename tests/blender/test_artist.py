@@ -415,6 +415,16 @@ def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
         assert message[0].isupper() and message.endswith("."), message
 
 
+def test_one_kept_stray_reads_as_one_point(quick, extension):
+    notes = ["kept 1 isolated point (under 0.01 %): too few to be outliers; set outliers to "
+             "'drop' to remove them"]
+    reconstruct, job = finished_job(extension, quick, notes)
+    reports = Reports()
+    reconstruct.finish_job(reports, bpy.context, job)
+    warnings = [message for kind, message in reports.messages if kind == {'WARNING'}]
+    assert warnings and "Kept 1 stray-looking point (under 0.01 %)" in warnings[0], warnings
+
+
 def test_an_empty_result_is_reported_once(quick, extension):
     reconstruct, job = finished_job(
         extension, quick, ["no surface found",

@@ -128,6 +128,18 @@ def sphere_with_far_strays(surface=9950, strays=50, seed=7):
     return np.vstack([sphere, far]), np.r_[np.zeros(surface, bool), np.ones(strays, bool)]
 
 
+def test_one_kept_stray_in_a_large_cloud_reads_as_one_point_under_a_hundredth_percent():
+    points, stray = plane_with_strays(surface=30000, strays=1, seed=5)
+    result = reconstruct(points, ReconstructSettings(resolution=32, device="cpu"),
+                         udf_source="nearest")
+    assert result.stats["outliers"] == 0
+    assert result.stats["outliers_found"] == 1
+    # singular, and a share that does not read as zero
+    assert result.messages[0].startswith("kept 1 isolated point (under 0.01 %): "), \
+        result.messages
+    assert not any("(0.00 %)" in message for message in result.messages), result.messages
+
+
 def test_box_shrink_is_how_much_the_outliers_stretch_the_box():
     points, stray = sphere_with_far_strays()
     assert box_shrink(points, stray) > 1000
