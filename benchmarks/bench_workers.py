@@ -1,14 +1,14 @@
-"""Tiles on one core, in this process and in worker processes: wall seconds, the speed-ups, and
-whether the meshes are the same.
+"""Tiles on one core and in worker processes: wall seconds, the speed-ups, and whether the
+meshes are the same.
 
     python benchmarks/bench_workers.py [--cloud examples/owl_50k.ply] [--resolution 256]
         [--tile-cells 96] [--workers 1 2] [--repeats 2] [--radius-mode fixed]
 
-``--workers 1`` makes the tiles in this process, whose field and mesher run on a thread per core;
-the run named "1 core" does the same on one thread (``OMP_NUM_THREADS=1``), as a worker process
-does. Each repeat runs the one-core run and every worker count once, in turn, so that other jobs
-on the machine weigh on all of them alike; speed-ups are ratios of the medians. The mesh of every
-run is compared with the first one's, vertex for vertex.
+``--workers 1`` makes the tiles in this process on one core (one thread for the field, the
+mesher and the k-d queries); ``--workers N`` in N worker processes of one thread each, and 0 on
+every core. Each repeat runs every worker count once, in turn, so that other jobs on the machine
+weigh on all of them alike; speed-ups are ratios of the medians, over the first count given.
+The mesh of every run is compared with the first one's, vertex for vertex.
 """
 
 import argparse
@@ -35,26 +35,15 @@ def main():
     parser.add_argument("--radius-mode", default="fixed")
     args = parser.parse_args()
     cloud = read_point_cloud(args.cloud)
-    runs = ["1 core"] + [str(w) for w in args.workers]
+    runs = list(args.workers)
     seconds = {run: [] for run in runs}
     first = None
     for repeat in range(args.repeats):
         for run in runs:
-            one_core = run == "1 core"
             settings = {"resolution": args.resolution, "tile_cells": args.tile_cells,
-                        "workers": 1 if one_core else int(run),
-                        "radius_mode": args.radius_mode}
-            threads = os.environ.get("OMP_NUM_THREADS")
-            if one_core:
-                os.environ["OMP_NUM_THREADS"] = "1"
+                        "workers": run, "radius_mode": args.radius_mode}
             start = time.perf_counter()
-            try:
-                result = reconstruct(cloud, settings)
-            finally:
-                if threads is None:
-                    os.environ.pop("OMP_NUM_THREADS", None)
-                else:
-                    os.environ["OMP_NUM_THREADS"] = threads
+            result = reconstruct(cloud, settings)
             wall = time.perf_counter() - start
             seconds[run].append(wall)
             mesh = (np.asarray(result.mesh.vertices), np.asarray(result.mesh.faces))
@@ -62,15 +51,14 @@ def main():
                 first = mesh
             same = (mesh[0].shape == first[0].shape and np.array_equal(mesh[0], first[0])
                     and np.array_equal(mesh[1], first[1]))
-            print(f"repeat {repeat + 1}  workers {run:6s}  {wall:7.1f} s  "
+            print(f"repeat {repeat + 1}  workers {run}  {wall:7.1f} s  "
                   f"tiles {result.stats.get('tiles')}  faces {len(mesh[1]):,}  "
                   f"same mesh as the first run: {same}", flush=True)
-    one_core = statistics.median(seconds["1 core"])
-    in_process = statistics.median(seconds[runs[1]])
+    base = statistics.median(seconds[runs[0]])
     for run in runs:
         median = statistics.median(seconds[run])
-        print(f"workers {run:6s}: median {median:.1f} s; speed-up over 1 core "
-              f"{one_core / median:.2f}x, over workers {runs[1]} {in_process / median:.2f}x")
+        print(f"workers {run}: median {median:.1f} s; speed-up over workers {runs[0]} "
+              f"{base / median:.2f}x")
 
 
 if __name__ == "__main__":

@@ -19,12 +19,47 @@ from contextlib import contextmanager
 from typing import Callable, Iterable, Iterator
 
 
+_budget = 0           # cores a reconstruction may use (core_budget), 0: no limit
+_pool = threading.local()  # .inside: this thread runs one of map_in_threads's tasks
+
+
 def cpu_threads() -> int:
-    """Threads to use: OMP_NUM_THREADS when set (benchmark workers set 1), else the CPU count."""
+    """Threads to use: OMP_NUM_THREADS when set (worker processes set 1), else the CPU count;
+    at most the cores of a :func:`core_budget` block."""
     try:
-        return max(int(os.environ.get("OMP_NUM_THREADS", "")), 1)
+        threads = max(int(os.environ.get("OMP_NUM_THREADS", "")), 1)
     except ValueError:
-        return max(os.cpu_count() or 1, 1)
+        threads = max(os.cpu_count() or 1, 1)
+    return min(threads, _budget) if _budget else threads
+
+
+def query_threads() -> int:
+    """Threads for one k-d query (``cKDTree.query(workers=...)``): one inside a task of
+    :func:`map_in_threads` (its siblings hold the other cores), else :func:`cpu_threads`."""
+    return 1 if getattr(_pool, "inside", False) else cpu_threads()
+
+
+@contextmanager
+def core_budget(cores: int):
+    """Let the work in the block use at most ``cores`` cores (0: every core): the threads of
+    the field, the mesher and the k-d queries, and the BLAS's. ``--workers 1`` is one core."""
+    global _budget
+    if cores <= 0:
+        yield
+        return
+    before, _budget = _budget, cores if not _budget else min(_budget, cores)
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        limiter = None
+    else:
+        limiter = threadpool_limits(_budget, user_api="blas")
+    try:
+        yield
+    finally:
+        _budget = before
+        if limiter is not None:
+            limiter.restore_original_limits()
 
 
 _held = 0             # one_blas_thread blocks running now, in any thread
@@ -74,10 +109,14 @@ def map_in_threads(task: Callable, items: Iterable, threads: int) -> Iterator:
             for item in items:
                 yield task(item)
             return
+        def in_pool(item):
+            _pool.inside = True
+            return task(item)
+
         with ThreadPoolExecutor(min(threads, len(items))) as pool:
             # closing pool.map's iterator (an error, a cancel, the caller stops reading)
             # cancels the tasks not yet started
-            yield from pool.map(task, items)
+            yield from pool.map(in_pool, items)
 
 
 def run_in_threads(task: Callable, items: Iterable, threads: int) -> None:

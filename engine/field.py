@@ -39,7 +39,7 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from .cpu_threads import cpu_threads, map_in_threads, run_in_threads
+from .cpu_threads import cpu_threads, map_in_threads, query_threads, run_in_threads
 from .devices import resolve_device
 from .errors import InputError
 from .gap_fill import fill_gaps
@@ -194,7 +194,7 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
         stop = min(start + 4 * QUERY_CHUNK, len(candidates))
         positions = origin + candidates[start:stop] * spacing
         distance, owner[start:stop] = tree.query(positions, k=1, distance_upper_bound=bound,
-                                                 workers=-1)
+                                                 workers=query_threads())
         keep[start:stop] = distance <= band_radius
         nearest[start:stop] = distance
         check_cancel(cancel)

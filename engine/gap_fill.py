@@ -31,6 +31,8 @@ from typing import Tuple
 
 import numpy as np
 
+from .cpu_threads import query_threads
+
 NEIGHBOURS = 12
 EDGE_NEIGHBOURS = 32
 GAP_NODES = 12.0  # spacings: the widest strip filled is about twice this
@@ -134,7 +136,7 @@ def _point_planes(tree, points: np.ndarray, reach: float):
     edge = np.empty(len(points), dtype=bool)
     for start in range(0, len(points), CHUNK):
         part = slice(start, start + CHUNK)
-        distance, near = tree.query(points[part], k=EDGE_NEIGHBOURS + 1, workers=-1)
+        distance, near = tree.query(points[part], k=EDGE_NEIGHBOURS + 1, workers=query_threads())
         around = points[near[:, 1:NEIGHBOURS + 1]]
         normal, tangent_u, tangent_v, _, spread[part] = _planes(around)
         normals[part] = normal
@@ -149,7 +151,7 @@ def _point_planes(tree, points: np.ndarray, reach: float):
 def _surrounded_plane_distance(tree, points, positions, spacing) -> np.ndarray:
     """Distance from each position to the plane of its nearest points where they are flat,
     surround it and it lies within ``IN_PLANE`` spacings of their plane; inf elsewhere."""
-    _, near = tree.query(positions, k=NEIGHBOURS, workers=-1)
+    _, near = tree.query(positions, k=NEIGHBOURS, workers=query_threads())
     around = points[near]
     normal, tangent_u, tangent_v, flat, _ = _planes(around)
     centre = around.mean(axis=1)

@@ -36,6 +36,7 @@ from typing import Optional
 
 import numpy as np
 
+from .cpu_threads import query_threads
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .settings import DEFAULT_OUTLIER_RATIO
 
@@ -184,7 +185,7 @@ def _isolated(points: np.ndarray, ratio: float, progress: ProgressFn = no_progre
     spacing = np.empty(len(points))
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
-        distances, _ = tree.query(block, k=neighbours + 1, workers=-1)
+        distances, _ = tree.query(block, k=neighbours + 1, workers=query_threads())
         spacing[start:start + len(block)] = distances[:, 1:].mean(axis=1)
         step()
     # the context: the nearest points of a sample (the points are distinct and sorted on x)
@@ -195,7 +196,7 @@ def _isolated(points: np.ndarray, ratio: float, progress: ProgressFn = no_progre
     isolated = np.empty(len(points), dtype=bool)
     for start in range(0, len(points), _CHUNK):
         block = points[start:start + _CHUNK]
-        distance, nearest = sample_tree.query(block, k=context + 1, workers=-1)
+        distance, nearest = sample_tree.query(block, k=context + 1, workers=query_threads())
         itself = distance[:, :1] == 0  # a sampled point is not its own context
         nearest = np.where(itself, nearest[:, 1:], nearest[:, :-1])
         typical = np.median(sample_spacing[nearest], axis=1)
@@ -218,9 +219,9 @@ def _on_the_surface(points: np.ndarray, flagged: np.ndarray, progress: ProgressF
     on_surface = np.empty(len(suspects), dtype=bool)
     for start in range(0, len(suspects), _CHUNK):
         block = points[suspects[start:start + _CHUNK]]
-        _, around = everything.query(block, k=FLAT_NEIGHBOURS + 1, workers=-1)  # itself included
+        _, around = everything.query(block, k=FLAT_NEIGHBOURS + 1, workers=query_threads())  # itself included
         flat = _smallest_share(_covariance_eigen(points[around])[0]) < FLATNESS
-        _, beside = surface.query(block, k=FLAT_NEIGHBOURS, workers=-1)
+        _, beside = surface.query(block, k=FLAT_NEIGHBOURS, workers=query_threads())
         eigenvalues, eigenvectors = _covariance_eigen(unflagged[beside])
         centre = unflagged[beside].mean(axis=1)
         off = np.abs(np.einsum("ni,ni->n", block - centre, eigenvectors[:, :, 0]))

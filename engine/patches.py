@@ -10,6 +10,8 @@ from typing import Iterator, NamedTuple, Tuple, Union
 
 import numpy as np
 
+from .cpu_threads import query_threads
+
 MAX_POINTS = 64
 # Queries per k-d tree call: bounds memory at about chunk * max_points * 16 bytes of neighbours.
 QUERY_CHUNK = 16384
@@ -50,7 +52,7 @@ def nearest_within(tree, queries: np.ndarray, radius: Union[float, np.ndarray],
     # cKDTree takes one upper bound per call: query at the largest radius (nudged up because
     # the bound is strict) and drop what lies beyond each row's own radius.
     bound = float(np.nextafter(radii.max(), np.inf)) if len(queries) else 1.0
-    distance, index = tree.query(queries, k=max_points, distance_upper_bound=bound, workers=-1)
+    distance, index = tree.query(queries, k=max_points, distance_upper_bound=bound, workers=query_threads())
     distance = distance.reshape(len(queries), max_points)
     index = index.reshape(len(queries), max_points)
     beyond = distance > radii[:, None]

@@ -18,6 +18,7 @@ from typing import Dict, List, Optional, Union
 
 import numpy as np
 
+from .cpu_threads import core_budget, query_threads
 from .errors import InputError
 from .field import UDF_SOURCES, compute_udf_band
 from .detail import AUTO_MAX_CELLS, choose_detail
@@ -100,6 +101,13 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     Cancelled
         ``cancel()`` returned True.
     """
+    settings = ReconstructSettings.coerce(settings)
+    with core_budget(settings.workers):  # --workers 1: one core, in every stage
+        return _reconstruct(cloud, settings, progress, cancel, udf_source)
+
+
+def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
+                 udf_source: Optional[str]) -> ReconstructResult:
     from scipy.spatial import cKDTree
 
     from .meshing import MeshingResult, extract_surface
@@ -107,7 +115,6 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 
     started = time.perf_counter()
     progress = progress or no_progress
-    settings = ReconstructSettings.coerce(settings)
     udf_source = udf_source or settings.udf_source
     if udf_source not in UDF_SOURCES:
         raise InputError(f"udf source must be one of {', '.join(UDF_SOURCES)}, not {udf_source!r}")
@@ -164,7 +171,7 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
     vertices_unit = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
     out_colors = None
     if colors is not None and len(vertices_unit):
-        _, nearest = tree.query(vertices_unit, k=1, workers=-1)
+        _, nearest = tree.query(vertices_unit, k=1, workers=query_threads())
         out_colors = np.asarray(colors, dtype=np.float32)[nearest]
     # a similarity transform leaves unit normals unchanged
     result_mesh = Mesh(frame.from_unit(vertices_unit),

@@ -227,10 +227,11 @@ class ReconstructSettings:
         low=0, high=4096, soft_max=1024)
     workers: int = setting(
         0, "Workers",
-        "Processes that make tiles side by side (0: one per CPU core). The mesh is the same "
-        "for any number",
-        help="worker processes for the tiles, 0: one per CPU core; the mesh is the same, bit "
-             "for bit, for any number",
+        "CPU cores to use: processes that make tiles side by side, or threads for a scan made "
+        "in one grid (0: every core). The mesh is the same for any number",
+        help="CPU cores to use: worker processes for the tiles, or threads for a scan made in "
+             "one grid (1: one core throughout); 0: every core; the mesh is the same, bit for "
+             "bit, for any number",
         low=0, high=1024, soft_max=64)
     scheduler: str = setting(
         "", "Dask Scheduler",

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from ..cpu_threads import query_threads
 from . import mesh_ops
 
 SPECK_AREA = 20.0  # voxels^2: a piece smaller than this (about 4.5 x 4.5 voxels) may be a speck
@@ -45,12 +46,12 @@ def find_specks(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.n
         near = np.zeros(len(rest), bool)
         if (~small).any():
             dist, _ = cKDTree(cents[~small]).query(cents[rest], k=1,
-                                                  distance_upper_bound=ON_SHEET, workers=-1)
+                                                  distance_upper_bound=ON_SHEET, workers=query_threads())
             near = np.isfinite(dist)
         # small pieces lying on a larger small piece
         k = min(SMALL_NEIGHBOURS, len(rest))
         dist, idx = cKDTree(cents[rest]).query(cents[rest], k=k, distance_upper_bound=ON_SHEET,
-                                              workers=-1)
+                                              workers=query_threads())
         found = np.isfinite(dist)
         other = rest[np.where(found, idx, 0)]
         larger = piece_area[label[other]] > piece_area[label[rest]][:, None]

@@ -48,6 +48,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from ..compiled import kernels as load_kernels
+from ..cpu_threads import query_threads
 from ..progress import CancelFn, check_cancel
 from . import mesh_ops
 
@@ -80,7 +81,7 @@ def _candidates(tree, cents, normals, query, probe, k):
     """Opposite-facing faces near ``probe`` points: (face, candidate, depth, lateral) arrays."""
     k = min(k, len(cents))
     _, idx = tree.query(probe, k=k, distance_upper_bound=TWIN_LATERAL + COINCIDENT,
-                        workers=-1)
+                        workers=query_threads())
     idx = idx.reshape(len(query), k)
     compiled = load_kernels("meshing.mesh_ops_kernels")
     if compiled is not None:
@@ -378,7 +379,7 @@ def drop_facing_pairs(vertices: np.ndarray, faces: np.ndarray, field, spacing: f
     cents = x[faces].mean(axis=1)
     k = min(16, len(faces))
     dist, idx = cKDTree(cents).query(cents, k=k, distance_upper_bound=FACING_DISTANCE,
-                                     workers=-1)
+                                     workers=query_threads())
     found = np.isfinite(dist)
     idx = np.where(found, idx, 0)
     cos = np.einsum("ikc,ic->ik", normals[idx], normals)
@@ -425,7 +426,7 @@ def _opposite_near(x: np.ndarray, faces: np.ndarray, which: np.ndarray) -> np.nd
     normals, area = mesh_ops.face_normals(x, faces)
     cents = x[faces].mean(axis=1)
     k = min(16, len(faces))
-    _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0, workers=-1)
+    _, idx = cKDTree(cents).query(cents[which], k=k, distance_upper_bound=1.0, workers=query_threads())
     idx = idx.reshape(len(which), k)
     valid = idx < len(faces)
     idx = np.where(valid, idx, 0)
@@ -740,7 +741,7 @@ def _sheet_ahead(x: np.ndarray, faces: np.ndarray, rim: np.ndarray, out: np.ndar
     tree = cKDTree(x[faces].mean(axis=1))
     hit = np.zeros(len(rim), bool)
     for step in (1.0, 1.5, 2.0):
-        d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6, workers=-1)
+        d, _ = tree.query(x[rim] + step * out, k=1, distance_upper_bound=0.6, workers=query_threads())
         hit |= np.isfinite(d)
     return hit
 
