@@ -93,6 +93,8 @@ def fill_gaps(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     # scan lines come from both, not all from the nearer line's closely spaced points
     start = origin if lattice_origin is None else lattice_origin
     thinned = _thinned(points, THIN_NODES * spacing, np.asarray(start, dtype=np.float64))
+    if len(thinned) < NEIGHBOURS:  # too few points to fit and surround a plane
+        return indices, values, 0
     thin_tree = cKDTree(thinned)
     distance = np.full(len(nodes), np.inf)
     for start in range(0, len(nodes), CHUNK):
@@ -131,15 +133,25 @@ def _point_planes(tree, points: np.ndarray, reach: float):
     directions (else the normal means nothing), and whether it is an edge point: one whose
     neighbours within ``reach`` (up to ``EDGE_NEIGHBOURS``) leave an angular gap wider than
     ``EDGE_GAP`` around it, or that has fewer than 3 of them."""
+    from .compiled import kernels
+
+    compiled = kernels("gap_fill_kernels")
     normals = np.empty_like(points)
     spread = np.empty(len(points), dtype=bool)
     edge = np.empty(len(points), dtype=bool)
     for start in range(0, len(points), CHUNK):
         part = slice(start, start + CHUNK)
         distance, near = tree.query(points[part], k=EDGE_NEIGHBOURS + 1, workers=query_threads())
+        # a cloud of fewer points than that: the missing neighbours (index len(points)) lie
+        # beyond reach; point them at a real one, which they never count as
+        near = np.minimum(near, len(points) - 1)
         around = points[near[:, 1:NEIGHBOURS + 1]]
         normal, tangent_u, tangent_v, _, spread[part] = _planes(around)
         normals[part] = normal
+        if compiled is not None:
+            edge[part] = compiled.edge_points(points, np.arange(start, start + len(near)), near,
+                                              distance, tangent_u, tangent_v, reach, EDGE_GAP)
+            continue
         # neighbours past reach repeat the point itself: no direction of their own
         within = distance[:, 1:] <= reach
         offsets = np.where(within[:, :, None], points[near[:, 1:]] - points[part, None], 0.0)

@@ -111,3 +111,34 @@ def test_a_scan_with_gaps_is_told_that_the_fill_would_close_them():
     rng = np.random.default_rng(0)
     dense = rng.uniform(0.0, 1.0, (20000, 3)) * np.array([1.0, 1.0, 0.0])
     assert not told(dense, False)
+
+
+@pytest.mark.parametrize("count", [13, 20, 33])
+def test_a_cloud_of_fewer_points_than_the_edge_test_reads_is_meshed(count):
+    """The edge test reads 32 neighbours; a cloud of 13 to 33 points has fewer."""
+    from engine.reconstruct import reconstruct
+
+    rng = np.random.default_rng(count)
+    points = np.column_stack([rng.random((count, 2)), np.zeros(count)])
+    result = reconstruct(points, ReconstructSettings(resolution=32), udf_source="nearest")
+    assert len(result.mesh.faces) > 0
+    assert np.abs(result.mesh.vertices[:, 2]).max() < 2.0 / 32  # the plane, within 2 voxels
+
+
+def test_the_compiled_edge_test_finds_the_numpy_edge_points(monkeypatch):
+    from scipy.spatial import cKDTree
+
+    from engine import gap_fill
+    from engine.compiled import kernels
+
+    assert kernels("gap_fill_kernels") is not None  # numba is a requirement
+    rng = np.random.default_rng(1)
+    # scan lines, a rim and scattered points: edge points of every kind
+    points = np.vstack([_line_scan(), rng.random((3000, 3)) * [1.0, 0.6, 0.02]])
+    tree = cKDTree(points)
+    compiled = gap_fill._point_planes(tree, points, 6 / 128)
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    numpy_path = gap_fill._point_planes(tree, points, 6 / 128)
+    assert 100 < numpy_path[2].sum() < len(points) - 100
+    for mine, theirs in zip(compiled, numpy_path):
+        np.testing.assert_array_equal(mine, theirs)
