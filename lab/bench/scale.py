@@ -12,7 +12,8 @@ Writes ``floor_<rooms>r_<points>p_<voxel>cm.json`` to ``--out`` and prints, for 
 (``--detail voxel_size``) and for Poisson: wall seconds, peak resident memory of the main
 process and of the largest worker, the tiles, and Chamfer-L1 (cm), F1 at 5 mm, 1 cm and 2 cm and
 normal consistency against the ground truth cropped to what the scan saw (faces within 5 cm of a
-point); and the scan's own floor: a second scan of the same floor, of the same size, scored the
+point; sampled room by room, :func:`truth_samples`, so that memory stays bounded on large
+floors); and the scan's own floor: a second scan of the same floor, of the same size, scored the
 same way (what a perfect reconstruction of this sampling would score). Each method runs in a
 fresh child process so its peak memory is its own.
 """
@@ -35,17 +36,52 @@ SAMPLES = 1_000_000
 
 
 def build(rooms: int, points: int, seed: int, folder: Path):
-    """Write the floor's ground truth and scan (and a second scan) as .npy files."""
-    from .dataset import crop_to_input
+    """Write the floor's scan, a second scan and the ground truth's samples as .npy files."""
     from .floor import make_floor, scan_floor
 
-    mesh, parts = make_floor(rooms, seed)
+    _, parts = make_floor(rooms, seed)
     cloud, _ = scan_floor(parts, points, seed)
     again, _ = scan_floor(parts, points, seed + 1)
-    truth = crop_to_input(mesh, cloud, CROP)
     np.save(folder / "cloud.npy", cloud)
     np.save(folder / "again.npy", again)
-    np.savez(folder / "truth.npz", vertices=truth.vertices, faces=truth.faces)
+    truth, normals = truth_samples(parts, cloud, folder, np.random.default_rng(seed))
+    np.savez(folder / "truth_samples.npz", points=truth, normals=normals)
+
+
+def truth_samples(parts, cloud: np.ndarray, folder: Path, rng: np.random.Generator,
+                  crop: float = CROP, samples: int = SAMPLES):
+    """``samples`` points (and their normals) drawn by area over the ground truth cropped to
+    what the scan saw (faces within ``crop`` of a point).
+
+    The crop runs room by room: a room's scan sees no other room (they stand ``floor.PITCH``
+    apart, with walls between), so this is the whole floor's crop, without ever holding the
+    whole cropped floor (its faces are split to ``crop / 2``: gigabytes for a large floor).
+    Each room's crop goes to ``folder`` while the areas are summed; the samples are then
+    shared out between the rooms by area and drawn room by room.
+    """
+    from engine.sampling import face_areas_and_normals, sample_surface
+
+    from .dataset import crop_to_input
+
+    areas = []
+    for number, (mesh, _) in enumerate(parts):
+        low = mesh.vertices.min(axis=0) - crop
+        high = mesh.vertices.max(axis=0) + crop
+        seen = cloud[np.all((cloud >= low) & (cloud <= high), axis=1)]
+        room = crop_to_input(mesh, seen, crop)
+        areas.append(float(face_areas_and_normals(room.vertices, room.faces)[0].sum())
+                     if len(room.faces) else 0.0)
+        np.savez(folder / f"truth_room_{number}.npz", vertices=room.vertices, faces=room.faces)
+    counts = rng.multinomial(samples, np.asarray(areas) / sum(areas))
+    points, normals = [], []
+    for number, count in enumerate(counts):
+        room = np.load(folder / f"truth_room_{number}.npz")
+        if count:
+            drawn, drawn_normals, _ = sample_surface(room["vertices"], room["faces"], count, rng)
+            points.append(drawn)
+            normals.append(drawn_normals)
+        (folder / f"truth_room_{number}.npz").unlink()
+    return np.concatenate(points), np.concatenate(normals)
 
 
 def write_cloud(rooms: int, points: int, seed: int, path: str) -> None:
@@ -98,7 +134,7 @@ def child(args) -> None:
     else:
         figures = run_poisson(folder, args.poisson_depth)
     # VmHWM starts afresh at exec; ru_maxrss would carry this process's parent's size at the
-    # fork (the parent holds the floor and its cropped truth)
+    # fork
     peak_kb = _status_kb("VmHWM")
     self = (peak_kb if peak_kb is not None
             else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20
@@ -107,13 +143,12 @@ def child(args) -> None:
 
 
 def score(vertices, faces, truth, seed: int = 0) -> dict:
+    """A mesh against the truth's samples (``truth_samples.npz``): CD, F1 and NC, in cm."""
     from engine.metrics import chamfer_f_nc
     from engine.sampling import sample_surface
 
-    rng = np.random.default_rng(seed)
-    pred, pred_n, _ = sample_surface(vertices, faces, SAMPLES, rng)
-    gt, gt_n, _ = sample_surface(truth["vertices"], truth["faces"], SAMPLES, rng)
-    return _in_cm(chamfer_f_nc(pred, pred_n, gt, gt_n, THRESHOLDS))
+    pred, pred_n, _ = sample_surface(vertices, faces, SAMPLES, np.random.default_rng(seed))
+    return _in_cm(chamfer_f_nc(pred, pred_n, truth["points"], truth["normals"], THRESHOLDS))
 
 
 def _in_cm(scores: dict) -> dict:
@@ -123,14 +158,11 @@ def _in_cm(scores: dict) -> dict:
 
 
 def scan_floor_score(folder: Path, truth) -> dict:
-    """The second scan, as points, against the cropped ground truth (normals not scored)."""
+    """The second scan, as points, against the truth's samples (normals not scored)."""
     from scipy.spatial import cKDTree
 
-    from engine.sampling import sample_surface
-
     again = np.load(folder / "again.npy")
-    gt, _, _ = sample_surface(truth["vertices"], truth["faces"], SAMPLES,
-                              np.random.default_rng(0))
+    gt = truth["points"]
     acc = cKDTree(gt).query(again, workers=-1)[0]
     comp = cKDTree(again).query(gt, workers=-1)[0]
     out = {"cd_cm": 0.5 * (acc.mean() + comp.mean()) * 100.0}
@@ -181,7 +213,7 @@ def run(args) -> int:
     build(args.rooms, args.points, args.seed, folder)
     print(f"floor of {args.rooms} rooms, {args.points:,} points: built in "
           f"{time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
-    truth = dict(np.load(folder / "truth.npz"))
+    truth = dict(np.load(folder / "truth_samples.npz"))
     rows = {"scan's own floor": scan_floor_score(folder, truth)}
     for method in ["ours"] + ([] if args.no_poisson else ["poisson"]):
         command = [sys.executable, "-m", "lab", "scale", "--child", method, "--work",
