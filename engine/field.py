@@ -159,9 +159,11 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
 
     Parameters
     ----------
-    tree : scipy.spatial.cKDTree over ``points``
-    points : (N, 3) float array, unit frame; points outside the grid are passed over (a tile's
-        grid: nodes near its edge may then miss the band, which its halo allows for)
+    tree : scipy.spatial.cKDTree over the cloud
+    points : (N, 3) float array, unit frame: the cloud, or some of its points (then the nodes
+        within ``band_radius`` of those along every axis, a cube, whose nearest point of the
+        whole cloud lies within ``band_radius``); points outside the grid are passed over (a
+        tile's grid: nodes near its edge may then miss the band, which its halo allows for)
     shape, origin, spacing : the grid (see :func:`grid_layout`)
     band_radius : R, unit frame
     cancel : optional cancel check, called between chunks
@@ -170,8 +172,8 @@ def find_band(tree, points: np.ndarray, shape: Tuple[int, int, int], origin: np.
     Returns
     -------
     indices : (M, 3) int64 node indices, in C order of the grid
-    nearest : (M,) float64 distance from each node to its nearest input point, <= R
-    owner : (M,) int64, with ``with_owner`` only
+    nearest : (M,) float64 distance from each node to the nearest point of the cloud, <= R
+    owner : (M,) int64, that point's index in ``tree``, with ``with_owner`` only
     """
     from scipy import ndimage
 

@@ -9,8 +9,10 @@ top of a wall) has them all on one side, and keeps its value, so open surfaces s
 :func:`fill_gaps` finds the *edge points*: those whose neighbours within ``EDGE_NODES``
 spacings (up to ``EDGE_NEIGHBOURS``) leave an angular gap wider than ``EDGE_GAP`` around them in
 their tangent plane (a scan line's points, a rim's). The nodes within ``GAP_NODES`` spacings of
-an edge point and farther than ``KEEP_NODES`` from every point take the distance to the plane of
-their ``NEIGHBOURS`` nearest points when
+an edge point along every axis (a cube: its corners reach farther across a gap than a ball
+would, and fill a good part of it), within ``GAP_NODES`` of some point and farther than
+``KEEP_NODES`` from every point take the distance to the plane of their ``NEIGHBOURS`` nearest
+points when
 
 * those points, taken from the cloud thinned to one per cube of ``THIN_NODES`` spacings (so that
   they come from both sides of a gap between closely sampled scan lines), are flat: the smallest
