@@ -4,6 +4,7 @@ bit, for any number of workers.
 
 Worker processes are started fresh (``spawn``: no state inherited from the caller, safe with
 threads) and each runs its tiles on one thread, so ``workers`` processes use ``workers`` cores.
+On Linux they end with the process that started them, even one killed outright.
 Dask (``pip install "dask[distributed]"``) is optional: ``scheduler="local"`` starts a local
 cluster of ``workers`` processes, any other value is the address of a running scheduler
 (``tcp://host:8786``).
@@ -112,13 +113,37 @@ def _one_thread() -> None:
     threadpool_limits(1)
 
 
+def _pool_worker_start(parent: int) -> None:
+    """A worker process's start-up: one thread, and on Linux an end with the run that started
+    it: killed outright (out of memory, ``kill -9``), the run leaves no worker computing a tile
+    nobody will read. (Not for Dask's workers: their parent is Dask's nanny.)"""
+    _one_thread()
+    _end_with_parent(parent)
+
+
+def _end_with_parent(parent: int) -> None:
+    """Ask Linux to send this process SIGTERM when its parent (pid ``parent``) ends
+    (``PR_SET_PDEATHSIG``)."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent ended before the request: end now
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def _in_processes(task, order, job, workers, progress, cancel) -> List:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_one_thread)
+                               initializer=_pool_worker_start, initargs=(os.getpid(),))
     try:
         return _windowed(lambda args: pool.submit(task, *args),
                          lambda futures: wait(futures, timeout=POLL_SECONDS,

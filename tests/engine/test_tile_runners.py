@@ -1,7 +1,18 @@
-"""The order tiles are sent to workers in, and the order their results come back in."""
+"""The order tiles are sent to workers in, the order their results come back in, and workers
+that end with the run."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
 
 from engine.progress import no_progress
 from engine.tile_runners import _windowed, send_order
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 class _Finished:
@@ -29,3 +40,54 @@ def test_results_keep_the_tile_order_whatever_the_sending_order():
                         window=2, progress=no_progress, cancel=None, where="here")
     assert sent == [1, 3, 2, 0]
     assert results == ["tile 0", "tile 1", "tile 2", "tile 3"]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_workers_end_when_their_parent_is_killed():
+    """A run killed outright (out of memory, kill -9) leaves no worker computing on."""
+    parent = subprocess.Popen(
+        [sys.executable, "-c", "import time; from engine.tile_runners import run_tiles; "
+                               "run_tiles(time.sleep, 2, lambda number: (120.0,), workers=2)"],
+        cwd=ROOT, env={**os.environ, "PYTHONPATH": ROOT})
+    try:
+        workers = []
+        deadline = time.monotonic() + 60
+        while len(workers) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+            workers = _spawned_children(parent.pid)
+        assert len(workers) == 2, "the workers did not start"
+        time.sleep(1.0)  # past their start-up
+    finally:
+        parent.kill()
+        parent.wait()
+    deadline = time.monotonic() + 20
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = [pid for pid in workers if _alive(pid)]
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    assert not left, "workers outlived their parent"
+
+
+def _spawned_children(parent: int) -> list:
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = open(f"/proc/{entry}/stat").read()
+            command = open(f"/proc/{entry}/cmdline", "rb").read()
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        if ppid == parent and b"spawn_main" in command:
+            found.append(int(entry))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
