@@ -111,9 +111,10 @@ class _Seam:
     core border) and the faces sharing a vertex with them, so that every edge of a zone face
     has all of its faces here; ``face_piece``: the piece of each seam face (the pieces are the
     tiles' own vertex-connected components, numbered across the tiles); ``rest``: per tile,
-    its other faces (joined numbering) and their pieces; ``piece_tile``, ``piece_area``,
-    ``piece_faces``: per piece; ``a``, ``b``: the seam vertices to weld
-    (:func:`_pairs_across`).
+    its other faces and their pieces, both numbered within the tile (int32: a third of the
+    joined int64 faces' memory); ``piece_first``: per tile, the number of its first piece;
+    ``piece_tile``, ``piece_area``, ``piece_faces``: per piece; ``a``, ``b``: the seam vertices
+    to weld (:func:`_pairs_across`).
     """
 
     vertices: np.ndarray
@@ -123,6 +124,7 @@ class _Seam:
     zone: np.ndarray
     face_piece: np.ndarray
     rest: list
+    piece_first: np.ndarray
     piece_tile: np.ndarray
     piece_area: np.ndarray
     piece_faces: np.ndarray
@@ -130,26 +132,33 @@ class _Seam:
     b: np.ndarray
 
 
-def _seam(pieces, tiles, spacing: float) -> _Seam:
-    """Split the tiles' kept faces ``pieces`` (``(vertices, faces)`` per tile of ``tiles``)."""
+def _seam(pieces, tiles, spacing: float, consume: bool = False) -> _Seam:
+    """Split the tiles' kept faces ``pieces`` (``(vertices, faces)`` per tile of ``tiles``).
+
+    ``consume``: empty the list ``pieces`` as it is read, so that each tile's arrays are freed
+    as soon as they are split (the caller must hold no other reference to them).
+    """
     from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
 
     offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
     vertices = np.concatenate([np.asarray(v, np.float64).reshape(-1, 3) for v, _ in pieces]
                               + [np.zeros((0, 3))])
+    tile_faces = [f for _, f in pieces]
+    if consume:
+        pieces.clear()  # the tiles' vertices now live in ``vertices`` only
     near = np.zeros(len(vertices), bool)
     seam_faces, seam_zone, seam_piece, rest = [], [], [], []
-    piece_tile, piece_area, piece_faces = [], [], []
+    piece_tile, piece_area, piece_faces, piece_first = [], [], [], []
     first = 0
-    for number, ((v, f), tile) in enumerate(zip(pieces, tiles)):
-        v = np.asarray(v, np.float64).reshape(-1, 3)
-        f = np.asarray(f, np.int64).reshape(-1, 3)
+    for number, tile in enumerate(tiles):
+        v = vertices[offsets[number]:offsets[number + 1]]
+        f = np.asarray(tile_faces[number], np.int64).reshape(-1, 3)
+        tile_faces[number] = None
         count, label = vertex_components(len(v), f) if len(f) else (0, np.zeros(0, np.int64))
+        piece_first.append(first)
         piece_tile.append(np.full(count, number, np.int64))
         piece_area.append(np.bincount(label, weights=face_normals(v, f)[1], minlength=count))
         piece_faces.append(np.bincount(label, minlength=count))
-        label = label + first
-        first += count
         margin = np.minimum(v - tile.low, tile.high - v).min(axis=1)
         close = margin < SEAM_CELLS * spacing
         near[offsets[number]:offsets[number + 1]] = close
@@ -157,11 +166,12 @@ def _seam(pieces, tiles, spacing: float) -> _Seam:
         touched = np.zeros(len(v), bool)
         touched[f[zone]] = True
         seam = touched[f].any(axis=1)
-        joined = f + offsets[number]
-        seam_faces.append(joined[seam])
+        seam_faces.append(f[seam] + offsets[number])
         seam_zone.append(zone[seam])
-        seam_piece.append(label[seam])
-        rest.append((joined[~seam], label[~seam]))
+        seam_piece.append(label[seam] + first)
+        rest.append((f[~seam].astype(np.int32), label[~seam].astype(np.int32)))
+        first += count
+        del f, label, seam, zone, touched
     ids, local = np.unique(np.concatenate(seam_faces + [np.zeros((0, 3), np.int64)]),
                            return_inverse=True)
     faces = local.reshape(-1, 3)
@@ -175,14 +185,15 @@ def _seam(pieces, tiles, spacing: float) -> _Seam:
         i, j = _pairs_across(vertices[ids[rim]], tile_of, spacing)
         a, b = rim[i], rim[j]
     return _Seam(vertices, offsets, ids, faces, np.concatenate(seam_zone + [np.zeros(0, bool)]),
-                 np.concatenate(seam_piece + [empty]), rest,
+                 np.concatenate(seam_piece + [empty]), rest, np.asarray(piece_first, np.int64),
                  np.concatenate(piece_tile + [empty]), np.concatenate(piece_area + [np.zeros(0)]),
                  np.concatenate(piece_faces + [empty]), a, b)
 
 
 def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     """One mesh from the tiles' kept faces: ``pieces`` is a list of ``(vertices, faces)``, one
-    per tile of ``tiles``.
+    per tile of ``tiles``. The list is emptied as it is read, so that a tile's arrays are freed
+    once split (pass a copy of the list to keep them).
 
     Only the seam (:class:`_Seam`) is welded and tidied: each tile's own mesh is already clean,
     so the faces away from its core's border pass through unchanged, and memory beyond the
@@ -200,7 +211,7 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     from .meshing.layers import close_pinholes
     from .meshing.mesh_ops import face_normals, split_nonmanifold_vertices, vertex_components
 
-    seam = _seam(pieces, tiles, spacing)
+    seam = _seam(pieces, tiles, spacing, consume=True)
     stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0,
              "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
              "cleanup_small_pieces": 0}
@@ -297,23 +308,47 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
               dropped: np.ndarray):
     """The whole mesh: every tile's faces away from the seam (turned over where their piece
     was, left out where it was ``dropped``) and the stitched seam ``faces`` over its vertices
-    ``local`` (the seam's vertices, welded, then any copies); unused vertices removed."""
+    ``local`` (the seam's vertices, welded, then any copies); unused vertices removed.
+
+    The output's faces are filled in place tile by tile, each tile's rest freed once copied,
+    and renumbered in place, so the peak is about the output and the seam, not several copies
+    of the scene.
+    """
     vertices = seam.vertices
     n, s = len(vertices), len(seam.ids)
     vertices[seam.ids] = local[:s]
     lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
-    parts = []
-    for rest, piece in seam.rest:
-        keep = ~dropped[piece]
-        rest, piece = rest[keep], piece[keep]
-        parts.append(np.where(flip[piece][:, None], rest[:, ::-1], rest))
-    parts.append(lookup[faces])
-    faces = np.concatenate(parts)
-    vertices = np.concatenate([vertices, local[s:]])
-    used = np.zeros(len(vertices), bool)
-    used[faces.reshape(-1)] = True
-    remap = np.cumsum(used) - 1
-    return vertices[used], remap[faces]
+    seam_faces = lookup[faces]
+    kept = []
+    for (rest, piece), first in zip(seam.rest, seam.piece_first):
+        kept.append(~dropped[first + piece])
+    out = np.empty((sum(int(k.sum()) for k in kept) + len(seam_faces), 3), np.int64)
+    at = 0
+    for number, first in enumerate(seam.piece_first):
+        rest, piece = seam.rest[number]
+        seam.rest[number] = None
+        rest, piece = rest[kept[number]], piece[kept[number]]
+        block = out[at:at + len(rest)]
+        np.add(rest, seam.offsets[number], out=block)
+        turn = np.flatnonzero(flip[first + piece])
+        block[turn] = block[turn][:, ::-1]
+        at += len(rest)
+        del rest, piece, block
+    out[at:] = seam_faces
+    del seam_faces
+    used = np.zeros(n + len(local) - s, bool)
+    used[out.reshape(-1)] = True
+    count = int(used.sum())
+    result = np.empty((count, 3))
+    kept_old = int(used[:n].sum())
+    np.compress(used[:n], vertices, axis=0, out=result[:kept_old])
+    np.compress(used[n:], local[s:], axis=0, out=result[kept_old:])
+    seam.vertices = vertices = None
+    remap = np.cumsum(used, dtype=np.int64)
+    remap -= 1
+    flat = out.reshape(-1)
+    np.take(remap, flat, out=flat, mode="clip")
+    return result, out
 
 
 def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
@@ -550,19 +585,22 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                            [costs[int(number)] for number in turn])
         for number, result in zip(turn, redone):
             results[number] = result
+        del redone, result
     pieces = []
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
     patch_points = 0.0
     device = "none"
     isos = []
-    for vertices, faces, band in results:
+    for number, (vertices, faces, band) in enumerate(results):
         isos.append(band["iso"])
         pieces.append((vertices, faces))
+        results[number] = None  # the stitcher frees each tile's arrays once it has read them
         for key in sums:
             sums[key] += int(band.get(key, 0))
         seen = band.get("network_queries", 0) - band["sparse_balls"]
         patch_points += band["mean_patch_points"] * seen
         device = band["device"]
+    del vertices, faces
     progress(0.95, f"stitching {len(tiles)} tiles")
     vertices, faces, stitched = stitch(pieces, tiles, spacing, meshing.min_component_faces)
     seen = sums["network_queries"] - sums["sparse_balls"]

@@ -105,14 +105,24 @@ def face_components(n_faces: int, pairs: np.ndarray):
 
 
 def vertex_components(n: int, faces: np.ndarray):
-    """Connected components of faces sharing a vertex: (count, face labels (m,) int)."""
+    """Connected components of faces sharing a vertex: (count, face labels (m,) int), the
+    components numbered in the order of their lowest vertex."""
     from scipy import sparse
     from scipy.sparse.csgraph import connected_components
 
-    rows = np.concatenate([faces[:, 0], faces[:, 1]])
-    cols = np.concatenate([faces[:, 1], faces[:, 2]])
-    graph = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    compiled = load_kernels("meshing.mesh_ops_kernels")
+    if compiled is not None:  # a union-find: 17 bytes per vertex and 8 per face
+        faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        return compiled.vertex_components(n, faces)
+    # a sparse graph with int32 indices (it holds about 60 bytes per face)
+    faces = np.asarray(faces).reshape(-1, 3)
+    index = np.int32 if n < 2 ** 31 else np.int64
+    rows = np.concatenate([faces[:, 0], faces[:, 1]]).astype(index, copy=False)
+    cols = np.concatenate([faces[:, 1], faces[:, 2]]).astype(index, copy=False)
+    graph = sparse.csr_matrix((np.ones(len(rows), bool), (rows, cols)), shape=(n, n))
+    del rows, cols
+    _, labels = connected_components(graph, directed=False)  # in order of the lowest vertex
+    del graph
     used, face_labels = np.unique(labels[faces[:, 0]], return_inverse=True)
     return len(used), face_labels
 

@@ -122,6 +122,25 @@ def test_compiled_edge_topology_equals_the_numpy_one(monkeypatch):
         assert np.array_equal(getattr(got, name), getattr(want, name)), name
 
 
+def test_compiled_vertex_components_equal_the_numpy_ones(monkeypatch):
+    """Labels in the order of each component's lowest vertex, both ways: many small pieces
+    (faces among nearby vertices), unused vertices, degenerate faces, and no faces at all."""
+    from engine.compiled import kernels
+
+    assert kernels("meshing.mesh_ops_kernels") is not None
+    rng = np.random.default_rng(5)
+    start = rng.integers(0, 5000, 4000)
+    faces = start[:, None] + rng.integers(0, 6, size=(4000, 3))
+    faces[:30, 2] = faces[:30, 0]
+    cases = [(5100, faces), (5100, faces[::-1]), (10, np.zeros((0, 3), np.int64))]
+    got = [mo.vertex_components(n, f) for n, f in cases]
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    want = [mo.vertex_components(n, f) for n, f in cases]
+    assert want[0][0] > 100
+    for (count, labels), (want_count, want_labels) in zip(got, want):
+        assert count == want_count and np.array_equal(labels, want_labels)
+
+
 def test_compiled_twin_candidates_equal_the_numpy_ones(monkeypatch):
     """The opposite-facing neighbours of a double cover's faces, compiled and in numpy."""
     from scipy.spatial import cKDTree

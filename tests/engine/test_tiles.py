@@ -223,7 +223,9 @@ def test_only_the_seam_is_stitched():
     inf = np.full(3, np.inf)
     tiles = [Tile((0, 0, 0), -inf, np.array([0.0, np.inf, np.inf])),
              Tile((1, 0, 0), np.array([0.0, -np.inf, -np.inf]), inf)]
-    vertices, faces, stats = stitch([left, right], tiles, step)
+    given = [left, right]
+    vertices, faces, stats = stitch(given, tiles, step)
+    assert given == []  # the stitcher frees each tile's arrays once it has read them
     assert stats["holes_closed"] == 1
     topo = edge_topology(faces)
     rim = vertices[topo.edges[topo.counts == 1]].mean(axis=1)
