@@ -32,7 +32,10 @@ AUTO_MAX_CELLS = 512
 """``auto`` never makes more cells than this along the longest side (memory grows with the
 surface area in cells); a finer grid needs an explicit voxel size."""
 MAX_CELLS = 2048
-"""Most cells along the longest side a voxel size may ask for."""
+"""Most cells along the longest side of one grid: a scan made without tiles, or one tile."""
+MAX_TILED_CELLS = 262_144
+"""Most cells along the longest side of a scan made in tiles (2.6 km at 1 cm): a worker's memory
+follows the tile, not the scan, and the main process holds the mesh."""
 
 
 @dataclass(frozen=True)
@@ -57,16 +60,22 @@ def choose_detail(points: np.ndarray, settings: ReconstructSettings) -> Detail:
     Raises
     ------
     InputError
-        A voxel size that gives more than :data:`MAX_CELLS` cells along the longest side.
+        A voxel size that gives more than :data:`MAX_TILED_CELLS` cells along the longest side,
+        or more than :data:`MAX_CELLS` in one grid (tiles asked larger than that).
     """
     low, high = points.min(axis=0), points.max(axis=0)
     extent = float(np.max(high - low))
     voxel, cells, capped = cell_size(len(points), extent, settings)
-    if cells > MAX_CELLS:
+    if cells > MAX_TILED_CELLS:
         raise InputError(
             f"a voxel size of {voxel:.4g} makes {cells:,.0f} cells along the cloud's longest "
-            f"side ({extent:.4g} units); at most {MAX_CELLS:,} are possible: raise the voxel "
-            f"size to at least {_round_up(extent / MAX_CELLS)}")
+            f"side ({extent:.4g} units); at most {MAX_TILED_CELLS:,} are possible: raise the "
+            f"voxel size to at least {_round_up(extent / MAX_TILED_CELLS)}")
+    if cells > MAX_CELLS and settings.tile_cells > MAX_CELLS:
+        raise InputError(
+            f"tiles of {settings.tile_cells:,} cells are larger than one grid may be "
+            f"({MAX_CELLS:,} cells per side); set tile cells to at most {MAX_CELLS:,}, or 0 for "
+            f"automatic tiles")
     # the ratio is exactly 1 when the cells are the resolution: the unit frame, bit for bit
     scale = extent * (settings.resolution / cells)
     return Detail(voxel, cells, UnitFrame(center=(low + high) / 2.0, scale=scale), capped)

@@ -273,7 +273,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--poisson-depth", type=int, default=10)
     parser.add_argument("--no-poisson", action="store_true")
     parser.add_argument("--seed", type=int, default=0, help="the floor's and the scan's")
-    parser.add_argument("--work", default="out/bench_scale", help="folder for the clouds")
+    parser.add_argument("--work", default="out/bench_scale",
+                        help="folder for the clouds and the truth; a floor built there before "
+                             "with the same --rooms, --points and --seed is reused")
     parser.add_argument("--out", default="bench_results/scale", help="folder for the JSON")
     parser.add_argument("--report", action="store_true",
                         help="print the table of the JSON files in --out; run nothing")
@@ -297,9 +299,17 @@ def run(args) -> int:
     folder = Path(args.work)
     folder.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    build(args.rooms, args.points, args.seed, folder)
-    print(f"floor of {args.rooms} rooms, {args.points:,} points: built in "
-          f"{time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
+    floor = {"rooms": args.rooms, "points": args.points, "seed": args.seed}
+    built = folder / "floor.json"
+    if built.exists() and json.loads(built.read_text()) == floor:
+        print(f"floor of {args.rooms} rooms, {args.points:,} points: reusing {folder}",
+              file=sys.stderr, flush=True)
+    else:
+        built.unlink(missing_ok=True)
+        build(args.rooms, args.points, args.seed, folder)
+        built.write_text(json.dumps(floor))  # written last: the folder is complete
+        print(f"floor of {args.rooms} rooms, {args.points:,} points: built in "
+              f"{time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
     truth = dict(np.load(folder / "truth_samples.npz"))
     rows = {"scan's own floor": scan_floor_score(folder, truth)}
     for method in ["ours"] + ([] if args.no_poisson else ["poisson"]):
@@ -307,7 +317,12 @@ def run(args) -> int:
                    str(folder.resolve()), "--voxel-size", str(args.voxel_size), "--tile-cells",
                    str(args.tile_cells), "--workers", str(args.workers), "--poisson-depth",
                    str(args.poisson_depth)]
-        done = subprocess.run(command, capture_output=True, text=True, check=True, cwd=ROOT)
+        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
+        if done.returncode:
+            sys.stderr.write(done.stderr[-4000:])
+            print(f"{method} failed (exit status {done.returncode}); its last output is above",
+                  file=sys.stderr)
+            return 1
         figures = json.loads(done.stdout.strip().splitlines()[-1])
         mesh = np.load(folder / f"{method}.npz")
         figures.update(score(mesh["vertices"], mesh["faces"], folder, truth))

@@ -7,11 +7,12 @@ import pytest
 from scipy.spatial import cKDTree
 
 from engine.commands.settings_args import add_settings_arguments
-from engine.detail import AUTO_MAX_CELLS, MAX_CELLS, cell_size, choose_detail
+from engine.detail import AUTO_MAX_CELLS, MAX_CELLS, MAX_TILED_CELLS, cell_size, choose_detail
 from engine.errors import InputError
 from engine.frame import UnitFrame
 from engine.reconstruct import reconstruct
 from engine.settings import ReconstructSettings
+from engine.tiles import AUTO_TILE_CELLS, tile_size
 
 
 def sphere_cloud(count: int, center=(0.0, 0.0, 0.0), radius: float = 0.5, seed: int = 0):
@@ -40,13 +41,26 @@ def test_auto_cells_follow_the_point_count():
 
 
 def test_too_fine_a_voxel_size_is_refused_with_the_size_that_works():
-    points = sphere_cloud(1000) * 100.0
+    points = sphere_cloud(1000) * 10_000.0
     with pytest.raises(InputError, match="raise the voxel size to at least") as refused:
         choose_detail(points, ReconstructSettings(detail="voxel_size", voxel_size=0.01))
     suggested = float(str(refused.value).rsplit(" ", 1)[1])
     detail = choose_detail(points, ReconstructSettings(detail="voxel_size",
                                                        voxel_size=suggested))
-    assert MAX_CELLS * 0.995 < detail.cells <= MAX_CELLS
+    assert MAX_TILED_CELLS * 0.995 < detail.cells <= MAX_TILED_CELLS
+
+
+def test_a_scan_larger_than_one_grid_is_made_in_tiles_of_at_most_one_grid():
+    """More cells than one grid may have are fine in tiles (automatic ones of 192 cells, or
+    tiles asked up to MAX_CELLS); tiles asked larger than one grid are refused."""
+    points = sphere_cloud(1000) * 50.0  # 50 units across: 5,000 cells at 0.01
+    settings = dict(detail="voxel_size", voxel_size=0.01)
+    detail = choose_detail(points, ReconstructSettings(**settings))
+    assert detail.cells > 2 * MAX_CELLS
+    assert tile_size(detail, ReconstructSettings(**settings)) == AUTO_TILE_CELLS
+    choose_detail(points, ReconstructSettings(**settings, tile_cells=MAX_CELLS))
+    with pytest.raises(InputError, match="set tile cells to at most 2,048"):
+        choose_detail(points, ReconstructSettings(**settings, tile_cells=MAX_CELLS + 1))
 
 
 def test_voxel_size_flag_sets_the_detail():

@@ -23,6 +23,14 @@ def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys):
     table = capsys.readouterr().out
     assert "| 1 rooms, 20,000 points | ours (voxel 4 cm) |" in table
 
+    # the same floor again reuses the built scan; a method that fails says why
+    status = main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.001",
+                   "--tile-cells", "4096", "--no-poisson", "--work", str(tmp_path / "work"),
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 1
+    assert "reusing" in err and "set tile cells to at most 2,048" in err and "ours failed" in err
+
 
 def test_write_cloud_writes_the_scan_the_benchmark_reconstructs(tmp_path):
     import numpy as np
