@@ -46,7 +46,8 @@ def build(rooms: int, points: int, seed: int, folder: Path):
     again, _ = scan_floor(parts, points, seed + 1)
     np.save(folder / "cloud.npy", cloud)
     np.save(folder / "again.npy", again)
-    truth, normals, rooms = truth_samples(parts, cloud, folder, np.random.default_rng(seed))
+    truth, normals, rooms = truth_samples(parts, cloud, folder, np.random.default_rng(seed),
+                                          samples=SAMPLES)
     np.savez(folder / "truth_samples.npz", points=truth, normals=normals, room=rooms)
 
 

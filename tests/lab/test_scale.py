@@ -5,7 +5,10 @@ import json
 from lab.__main__ import main
 
 
-def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys):
+def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys, monkeypatch):
+    from lab.bench import scale
+
+    monkeypatch.setattr(scale, "SAMPLES", 100_000)  # the truth's and the mesh's: a tiny floor
     out = tmp_path / "results"
     status = main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.04",
                    "--tile-cells", "48", "--no-poisson", "--work", str(tmp_path / "work"),
