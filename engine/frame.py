@@ -80,10 +80,15 @@ class UnitFrame:
         """Input units -> unit frame: ``(x - center) / scale``; x: (..., 3) -> (..., 3) float64."""
         return (np.asarray(x, dtype=np.float64) - self.center) / self.scale
 
-    def from_unit(self, x) -> np.ndarray:
+    def from_unit(self, x, in_place: bool = False) -> np.ndarray:
         """Unit frame -> input units: ``x * scale + center``, the inverse of :meth:`to_unit`
-        to float64 rounding; x: (..., 3) -> (..., 3) float64."""
-        return np.asarray(x, dtype=np.float64) * self.scale + self.center
+        to float64 rounding; x: (..., 3) -> (..., 3) float64. ``in_place``: overwrite ``x``
+        (a float64 array) instead of making a new array; the same values."""
+        if not in_place:
+            return np.asarray(x, dtype=np.float64) * self.scale + self.center
+        x *= self.scale
+        x += self.center
+        return x
 
 
 def validate_points(points, min_points: int = MIN_POINTS) -> np.ndarray:

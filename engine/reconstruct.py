@@ -139,11 +139,13 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     detail = choose_detail(points, settings)
     frame = detail.frame
     points_unit = frame.to_unit(points)
-    tree = cKDTree(points_unit)
+    del points  # the working frame's copy is all that is read from here on
+    # the k-d tree serves the untiled field and the colours; tiles build their own
+    tile_cells = tile_size(detail, settings)
+    tree = cKDTree(points_unit) if not tile_cells or colors is not None else None
     timings["frame"] = time.perf_counter() - started - timings["outliers"]
     check_cancel(cancel)
 
-    tile_cells = tile_size(detail, settings)
     if tile_cells:
         mark = time.perf_counter()
         vertices, faces, field_stats, mesh_stats = mesh_in_tiles(
@@ -173,8 +175,9 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     if colors is not None and len(vertices_unit):
         _, nearest = tree.query(vertices_unit, k=1, workers=query_threads())
         out_colors = np.asarray(colors, dtype=np.float32)[nearest]
-    # a similarity transform leaves unit normals unchanged
-    result_mesh = Mesh(frame.from_unit(vertices_unit),
+    # a similarity transform leaves unit normals unchanged; the stitched tiles' vertices are
+    # this function's own, mapped in place
+    result_mesh = Mesh(frame.from_unit(vertices_unit, in_place=bool(tile_cells)),
                        np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3),
                        None if mesh.normals is None else np.asarray(mesh.normals, np.float64),
                        out_colors)

@@ -73,6 +73,28 @@ def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: 
     return _in_processes(task, order, job, min(workers, count), progress, cancel)
 
 
+def process_peak_bytes() -> int:
+    """This process's peak resident memory so far, in bytes (0 where it cannot be read).
+
+    On Linux ``VmHWM``, which starts afresh when a worker process starts. Not
+    ``getrusage(RUSAGE_CHILDREN)`` in the parent: a child started by fork and exec carries in
+    it the parent's size at the fork.
+    """
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        import resource
+    except ImportError:  # Windows
+        return 0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak if sys.platform == "darwin" else peak * 1024)  # bytes on macOS, else kB
+
+
 def send_order(count: int, costs: Optional[Sequence[float]] = None) -> List[int]:
     """The tile numbers, costliest first (ties by number); in number order without costs."""
     if costs is None:

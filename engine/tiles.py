@@ -105,25 +105,28 @@ def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
 class _Seam:
     """The tiles' kept faces, split into the seam (what stitching may change) and the rest.
 
-    ``vertices``: every tile's vertices, joined (tile after tile, from ``offsets``); ``ids``:
-    the joined index of each seam vertex (ascending); ``faces``: the seam's faces over the seam
-    vertices: the zone faces (``zone``: a vertex within :data:`SEAM_CELLS` of their tile's
-    core border) and the faces sharing a vertex with them, so that every edge of a zone face
-    has all of its faces here; ``face_piece``: the piece of each seam face (the pieces are the
-    tiles' own vertex-connected components, numbered across the tiles); ``rest``: per tile,
-    its other faces and their pieces, both numbered within the tile (int32: a third of the
-    joined int64 faces' memory); ``piece_first``: per tile, the number of its first piece;
-    ``piece_tile``, ``piece_area``, ``piece_faces``: per piece; ``a``, ``b``: the seam vertices
-    to weld (:func:`_pairs_across`).
+    The vertices are numbered across the tiles, tile after tile (tile ``t`` from
+    ``offsets[t]``), but kept per tile in ``tile_vertices`` (no joined copy). ``ids``: the
+    joined index of each seam vertex (ascending), ``points`` their positions; ``faces``: the
+    seam's faces over the seam vertices: the zone faces (``zone``: a vertex within
+    :data:`SEAM_CELLS` of their tile's core border) and the faces sharing a vertex with them,
+    so that every edge of a zone face has all of its faces here; ``face_piece``: the piece of
+    each seam face (the pieces are the tiles' own vertex-connected components, numbered across
+    the tiles); ``rest``: per tile, its other faces and their pieces, both numbered within the
+    tile (int32: a third of the joined int64 faces' memory), or None when not asked for;
+    ``piece_first``: per tile, the number of its first piece; ``piece_tile``, ``piece_area``,
+    ``piece_faces``: per piece; ``a``, ``b``: the seam vertices to weld
+    (:func:`_pairs_across`).
     """
 
-    vertices: np.ndarray
+    tile_vertices: list
     offsets: np.ndarray
     ids: np.ndarray
+    points: np.ndarray
     faces: np.ndarray
     zone: np.ndarray
     face_piece: np.ndarray
-    rest: list
+    rest: Optional[list]
     piece_first: np.ndarray
     piece_tile: np.ndarray
     piece_area: np.ndarray
@@ -135,25 +138,26 @@ class _Seam:
 def _seam(pieces, tiles, spacing: float, consume: bool = False) -> _Seam:
     """Split the tiles' kept faces ``pieces`` (``(vertices, faces)`` per tile of ``tiles``).
 
-    ``consume``: empty the list ``pieces`` as it is read, so that each tile's arrays are freed
-    as soon as they are split (the caller must hold no other reference to them).
+    ``consume``: empty the list ``pieces`` as it is read, keep each tile's vertices and its
+    faces away from the seam (``rest``), and free the rest of each tile's arrays once split
+    (the caller must hold no other reference to them). Without it, only the seam is kept.
     """
     from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
 
     offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
-    vertices = np.concatenate([np.asarray(v, np.float64).reshape(-1, 3) for v, _ in pieces]
-                              + [np.zeros((0, 3))])
-    tile_faces = [f for _, f in pieces]
+    given = list(pieces)
     if consume:
-        pieces.clear()  # the tiles' vertices now live in ``vertices`` only
-    near = np.zeros(len(vertices), bool)
+        pieces.clear()  # the tiles' arrays now live in ``given`` only
+    tile_vertices = []
     seam_faces, seam_zone, seam_piece, rest = [], [], [], []
+    seam_points, seam_near = [], []
     piece_tile, piece_area, piece_faces, piece_first = [], [], [], []
     first = 0
     for number, tile in enumerate(tiles):
-        v = vertices[offsets[number]:offsets[number + 1]]
-        f = np.asarray(tile_faces[number], np.int64).reshape(-1, 3)
-        tile_faces[number] = None
+        v, f = given[number]
+        given[number] = None
+        v = np.asarray(v, np.float64).reshape(-1, 3)
+        f = np.asarray(f, np.int64).reshape(-1, 3)
         count, label = vertex_components(len(v), f) if len(f) else (0, np.zeros(0, np.int64))
         piece_first.append(first)
         piece_tile.append(np.full(count, number, np.int64))
@@ -161,33 +165,42 @@ def _seam(pieces, tiles, spacing: float, consume: bool = False) -> _Seam:
         piece_faces.append(np.bincount(label, minlength=count))
         margin = np.minimum(v - tile.low, tile.high - v).min(axis=1)
         close = margin < SEAM_CELLS * spacing
-        near[offsets[number]:offsets[number + 1]] = close
         zone = close[f].any(axis=1)
         touched = np.zeros(len(v), bool)
         touched[f[zone]] = True
         seam = touched[f].any(axis=1)
+        on_seam = np.zeros(len(v), bool)
+        on_seam[f[seam]] = True
+        seam_points.append(v[on_seam])  # in the order of ``ids``: ascending within the tile
+        seam_near.append(close[on_seam])
         seam_faces.append(f[seam] + offsets[number])
         seam_zone.append(zone[seam])
         seam_piece.append(label[seam] + first)
-        rest.append((f[~seam].astype(np.int32), label[~seam].astype(np.int32)))
+        if consume:
+            tile_vertices.append(v)
+            rest.append((f[~seam].astype(np.int32), label[~seam].astype(np.int32)))
         first += count
-        del f, label, seam, zone, touched
+        del v, f, label, seam, zone, touched, on_seam
     ids, local = np.unique(np.concatenate(seam_faces + [np.zeros((0, 3), np.int64)]),
                            return_inverse=True)
     faces = local.reshape(-1, 3)
+    points = np.concatenate(seam_points + [np.zeros((0, 3))])
+    near = np.concatenate(seam_near + [np.zeros(0, bool)])
     empty = np.zeros(0, np.int64)
     a = b = empty
     if len(faces):
         topo = edge_topology(faces)
         rim = np.unique(topo.edges[topo.counts == 1])
-        rim = rim[near[ids[rim]]]  # the zone's open edges are open in the whole mesh too
+        rim = rim[near[rim]]  # the zone's open edges are open in the whole mesh too
         tile_of = np.searchsorted(offsets, ids[rim], side="right") - 1
-        i, j = _pairs_across(vertices[ids[rim]], tile_of, spacing)
+        i, j = _pairs_across(points[rim], tile_of, spacing)
         a, b = rim[i], rim[j]
-    return _Seam(vertices, offsets, ids, faces, np.concatenate(seam_zone + [np.zeros(0, bool)]),
-                 np.concatenate(seam_piece + [empty]), rest, np.asarray(piece_first, np.int64),
-                 np.concatenate(piece_tile + [empty]), np.concatenate(piece_area + [np.zeros(0)]),
-                 np.concatenate(piece_faces + [empty]), a, b)
+    return _Seam(tile_vertices, offsets, ids, points, faces,
+                 np.concatenate(seam_zone + [np.zeros(0, bool)]),
+                 np.concatenate(seam_piece + [empty]), rest if consume else None,
+                 np.asarray(piece_first, np.int64), np.concatenate(piece_tile + [empty]),
+                 np.concatenate(piece_area + [np.zeros(0)]), np.concatenate(piece_faces + [empty]),
+                 a, b)
 
 
 def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
@@ -216,7 +229,7 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
              "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
              "cleanup_small_pieces": 0}
     faces, zone, piece = seam.faces, seam.zone, seam.face_piece
-    local = seam.vertices[seam.ids]
+    local = seam.points
     flip = np.zeros(len(seam.piece_tile), bool)
     if not len(faces):  # no surface near a border: nothing to stitch
         return _assemble(seam, local, faces, flip, flip) + (stats,)
@@ -310,13 +323,11 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
     was, left out where it was ``dropped``) and the stitched seam ``faces`` over its vertices
     ``local`` (the seam's vertices, welded, then any copies); unused vertices removed.
 
-    The output's faces are filled in place tile by tile, each tile's rest freed once copied,
-    and renumbered in place, so the peak is about the output and the seam, not several copies
-    of the scene.
+    The output's faces and vertices are filled in place tile by tile, each tile's arrays freed
+    once copied, and renumbered in place, so the peak is about the output and the seam, not
+    several copies of the scene.
     """
-    vertices = seam.vertices
-    n, s = len(vertices), len(seam.ids)
-    vertices[seam.ids] = local[:s]
+    n, s = int(seam.offsets[-1]), len(seam.ids)
     lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
     seam_faces = lookup[faces]
     kept = []
@@ -340,10 +351,20 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
     used[out.reshape(-1)] = True
     count = int(used.sum())
     result = np.empty((count, 3))
-    kept_old = int(used[:n].sum())
-    np.compress(used[:n], vertices, axis=0, out=result[:kept_old])
-    np.compress(used[n:], local[s:], axis=0, out=result[kept_old:])
-    seam.vertices = vertices = None
+    at = 0
+    for number, vertices in enumerate(seam.tile_vertices):
+        seam.tile_vertices[number] = None  # each tile's vertices freed once copied
+        low, high = seam.offsets[number], seam.offsets[number + 1]
+        used_here = used[low:high]
+        block = result[at:at + int(used_here.sum())]
+        np.compress(used_here, vertices, axis=0, out=block)
+        where = slice(*np.searchsorted(seam.ids, [low, high]))  # the tile's seam vertices
+        moved = seam.ids[where] - low
+        still = used_here[moved]
+        block[(np.cumsum(used_here) - 1)[moved[still]]] = local[where][still]
+        at += len(block)
+        del vertices, block
+    np.compress(used[n:], local[s:], axis=0, out=result[at:])
     remap = np.cumsum(used, dtype=np.int64)
     remap -= 1
     flat = out.reshape(-1)
@@ -357,7 +378,7 @@ def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
     seam = _seam(pieces, tiles, spacing)
     if not len(seam.a):
         return np.zeros(0, np.int64)
-    flip = _piece_flips(seam.vertices[seam.ids], seam.faces, seam.face_piece,
+    flip = _piece_flips(seam.points, seam.faces, seam.face_piece,
                         len(seam.piece_tile), seam.a, seam.b)
     area = seam.piece_area
     if area[flip].sum() > area[~flip].sum():
@@ -523,10 +544,12 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
               cancel: Optional[CancelFn] = None):
     """The field and mesh of one tile from its points (working frame); the faces of its core.
 
-    Returns ``(vertices, faces, stats)``: the kept faces and the field's and mesher's numbers.
+    Returns ``(vertices, faces, stats)``: the kept faces and the field's and mesher's numbers,
+    with ``peak_bytes``, the peak memory of the process that ran the tile, up to its end.
     """
     from .field import compute_udf_band
     from .meshing import extract_surface
+    from .tile_runners import process_peak_bytes
 
     progress = progress or no_progress
     halo = HALO_CELLS / settings.resolution
@@ -536,7 +559,8 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
     meshed = extract_surface(band.grid, meshing, sub_progress(progress, 0.6, 1.0), cancel)
     vertices, faces = keep_core(np.asarray(meshed.mesh.vertices, np.float64),
                                 np.asarray(meshed.mesh.faces, np.int64), tile)
-    return vertices, faces, {**band.stats, "iso": float(meshed.iso)}
+    return vertices, faces, {**band.stats, "iso": float(meshed.iso),
+                             "peak_bytes": process_peak_bytes()}
 
 
 def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
@@ -548,7 +572,9 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     -------
     vertices : (n, 3) float64; faces : (m, 3) int64
     field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
-        ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``
+        ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``,
+        ``tile_peak_bytes`` (the largest peak memory of a process that ran tiles: a worker's,
+        or this process's when the tiles ran here)
     mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
         ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
@@ -574,6 +600,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     # where a tile kept the other side of an open sheet than its neighbours, make it again
     # keeping the side they kept: the two sides share no vertices along the border
     turn = tiles_to_turn([(v, f) for v, f, _ in results], tiles, spacing)
+    tile_peak = max(band["peak_bytes"] for _, _, band in results)
     if len(turn):
         other = dataclasses.replace(meshing, other_side=not meshing.other_side)
 
@@ -585,6 +612,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                            [costs[int(number)] for number in turn])
         for number, result in zip(turn, redone):
             results[number] = result
+            tile_peak = max(tile_peak, result[2]["peak_bytes"])
         del redone, result
     pieces = []
     sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
@@ -607,6 +635,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
                    "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
+                   "tile_peak_bytes": tile_peak,
                    "udf_source": udf_source}
     mesh_stats = {**stitched, "tiles_turned": int(len(turn)),
                   "iso": float(np.median(isos)) if isos else 0.0}

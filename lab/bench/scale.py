@@ -120,7 +120,9 @@ def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int) -> dict:
     np.savez(folder / "ours.npz", vertices=result.mesh.vertices, faces=result.mesh.faces)
     return {"seconds": seconds, "tiles": result.stats.get("tiles", 1),
             "workers": result.stats.get("workers", 1), "faces": result.stats["faces"],
-            "cells": result.stats["cells"]}
+            "cells": result.stats["cells"],
+            "worker_peak_gib": (result.stats["tile_peak_bytes"] / 2 ** 30
+                                if "tile_peak_bytes" in result.stats else None)}
 
 
 def run_poisson(folder: Path, depth: int) -> dict:
@@ -145,12 +147,11 @@ def child(args) -> None:
     else:
         figures = run_poisson(folder, args.poisson_depth)
     # VmHWM starts afresh at exec; ru_maxrss would carry this process's parent's size at the
-    # fork
+    # fork. The workers report their own peaks (``tile_peak_bytes``) for the same reason.
     peak_kb = _status_kb("VmHWM")
     self = (peak_kb if peak_kb is not None
             else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20
-    workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2 ** 20
-    print(json.dumps({**figures, "peak_gib": self, "worker_peak_gib": workers}))
+    print(json.dumps({"worker_peak_gib": None, **figures, "peak_gib": self}))
 
 
 def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:

@@ -91,3 +91,17 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="VmHWM is Linux's")
+def test_a_worker_reports_its_own_peak_memory_not_its_parents():
+    import numpy as np
+
+    from engine.tile_runners import process_peak_bytes, run_tiles
+
+    held = np.ones(400 * 2 ** 20 // 8)  # 400 MiB, touched, held by this process
+    own = process_peak_bytes()
+    assert own >= held.nbytes
+    peaks = run_tiles(process_peak_bytes, 2, lambda number: (), workers=2)
+    # a fresh worker holds the interpreter, numpy and the engine, far less than its parent
+    assert all(0 < peak < own - 300 * 2 ** 20 for peak in peaks), (peaks, own)
