@@ -167,7 +167,7 @@ def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
 
     pred, pred_normals, _ = sample_surface(vertices, faces, SAMPLES,
                                            np.random.default_rng(seed))
-    accuracy, truth_normals = distance_to_rooms(pred, folder, len(_room_boxes(folder)))
+    accuracy, truth_normals = distance_to_rooms(pred, folder)
     completeness, mesh_normals = distance_to_mesh_by_room(truth, vertices, faces, folder)
     scores = _distances_to_scores(accuracy, completeness)
     scores["nc"] = float(0.5 * (np.abs(np.sum(pred_normals * truth_normals, axis=1)).mean()
@@ -175,8 +175,8 @@ def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
     return scores
 
 
-def distance_to_rooms(points: np.ndarray, folder: Path, rooms: int):
-    """Exact distance from each point to the cropped ground truth of all ``rooms``, with the
+def distance_to_rooms(points: np.ndarray, folder: Path):
+    """Exact distance from each point to the cropped ground truth of all the rooms, with the
     normal of the closest truth face.
 
     A point within ``MARGIN`` of a room's box is measured against that room alone; nearer
@@ -188,6 +188,7 @@ def distance_to_rooms(points: np.ndarray, folder: Path, rooms: int):
     distances = np.full(len(points), np.inf)
     normals = np.zeros((len(points), 3))
     boxes = _room_boxes(folder)
+    rooms = len(boxes)
     near_any = np.zeros(len(points), bool)
     for number in range(rooms):
         room = np.load(room_crop_path(folder, number))
@@ -256,7 +257,7 @@ def scan_floor_score(folder: Path, truth) -> dict:
     from scipy.spatial import cKDTree
 
     again = np.load(folder / "again.npy")
-    accuracy, _ = distance_to_rooms(again, folder, len(_room_boxes(folder)))
+    accuracy, _ = distance_to_rooms(again, folder)
     completeness = cKDTree(again).query(truth["points"], workers=-1)[0]
     return _distances_to_scores(accuracy, completeness)
 
