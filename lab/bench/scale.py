@@ -21,7 +21,6 @@ fresh child process so its peak memory is its own.
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import time
@@ -139,19 +138,16 @@ def run_poisson(folder: Path, depth: int) -> dict:
 
 def child(args) -> None:
     """One method in this (child) process; prints its figures as JSON."""
-    from .harness import _status_kb
+    from engine.tile_runners import process_peak_bytes
 
     folder = Path(args.work)
     if args.child == "ours":
         figures = run_ours(folder, args.voxel_size, args.tile_cells, args.workers)
     else:
         figures = run_poisson(folder, args.poisson_depth)
-    # VmHWM starts afresh at exec; ru_maxrss would carry this process's parent's size at the
-    # fork. The workers report their own peaks (``tile_peak_bytes``) for the same reason.
-    peak_kb = _status_kb("VmHWM")
-    self = (peak_kb if peak_kb is not None
-            else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20
-    print(json.dumps({"worker_peak_gib": None, **figures, "peak_gib": self}))
+    # this process's own peak (VmHWM starts afresh at exec); the workers report theirs
+    print(json.dumps({"worker_peak_gib": None, **figures,
+                      "peak_gib": process_peak_bytes() / 2 ** 30}))
 
 
 def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
