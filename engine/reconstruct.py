@@ -269,8 +269,6 @@ def _share(count: int, total: int, digits: int) -> str:
 
 def _piece_count(mesh: Mesh) -> int:
     """Connected pieces of a mesh (faces sharing a vertex), 0 for a mesh without faces."""
-    from .meshing.mesh_ops import vertex_components
+    from .meshing.mesh_ops import component_count
 
-    if len(mesh.faces) == 0:
-        return 0
-    return int(vertex_components(len(mesh.vertices), mesh.faces)[0])
+    return component_count(len(mesh.vertices), mesh.faces)

@@ -127,6 +127,19 @@ def vertex_components(n: int, faces: np.ndarray):
     return len(used), face_labels
 
 
+def component_count(n: int, faces: np.ndarray) -> int:
+    """How many connected components of faces sharing a vertex: :func:`vertex_components`'
+    count, without its per-face labels (a whole output mesh's pieces, counted in little
+    memory)."""
+    if not len(faces):
+        return 0
+    compiled = load_kernels("meshing.mesh_ops_kernels")
+    if compiled is not None:
+        faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        return int(compiled.component_count(n, faces))
+    return int(vertex_components(n, faces)[0])
+
+
 def boundary_loops(faces: np.ndarray, topo: EdgeTopology = None) -> int:
     """Number of boundary loops: connected pieces of the edges used by exactly one face."""
     from scipy import sparse

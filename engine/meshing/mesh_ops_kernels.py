@@ -113,11 +113,9 @@ def _root(parent, x):
 
 
 @numba.njit(nogil=True, cache=True)
-def vertex_components(n, faces):
-    """Connected components of faces (m, 3) sharing a vertex among ``n`` vertices: their count
-    and each face's label, the components numbered in the order of their lowest vertex (as
-    scipy's ``connected_components`` numbers them). A union always keeps the lower root, so a
-    component's root is its lowest vertex."""
+def _union_faces(n, faces):
+    """Union-find over the vertices of ``faces``: each vertex's parent, a component's root
+    being its lowest vertex (a union always keeps the lower root)."""
     parent = np.arange(n)
     for i in range(faces.shape[0]):
         for j in range(2):
@@ -127,6 +125,27 @@ def vertex_components(n, faces):
                 parent[b] = a
             elif b < a:
                 parent[a] = b
+    return parent
+
+
+@numba.njit(nogil=True, cache=True)
+def component_count(n, faces):
+    """How many connected components of faces sharing a vertex (no labels: 9 bytes per
+    vertex)."""
+    parent = _union_faces(n, faces)
+    root = np.zeros(n, dtype=np.bool_)
+    for i in range(faces.shape[0]):
+        root[_root(parent, faces[i, 0])] = True
+    return int(root.sum())
+
+
+@numba.njit(nogil=True, cache=True)
+def vertex_components(n, faces):
+    """Connected components of faces (m, 3) sharing a vertex among ``n`` vertices: their count
+    and each face's label, the components numbered in the order of their lowest vertex (as
+    scipy's ``connected_components`` numbers them). A union always keeps the lower root, so a
+    component's root is its lowest vertex."""
+    parent = _union_faces(n, faces)
     labels = np.empty(faces.shape[0], dtype=np.int64)
     used = np.zeros(n, dtype=np.bool_)
     for i in range(faces.shape[0]):

@@ -134,11 +134,13 @@ def test_compiled_vertex_components_equal_the_numpy_ones(monkeypatch):
     faces[:30, 2] = faces[:30, 0]
     cases = [(5100, faces), (5100, faces[::-1]), (10, np.zeros((0, 3), np.int64))]
     got = [mo.vertex_components(n, f) for n, f in cases]
+    counted = [mo.component_count(n, f) for n, f in cases]
     monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
     want = [mo.vertex_components(n, f) for n, f in cases]
     assert want[0][0] > 100
     for (count, labels), (want_count, want_labels) in zip(got, want):
         assert count == want_count and np.array_equal(labels, want_labels)
+    assert counted == [count for count, _ in want]  # the count alone, without the labels
 
 
 def test_compiled_twin_candidates_equal_the_numpy_ones(monkeypatch):
