@@ -179,8 +179,13 @@ def vertex_fans(n: int, faces: np.ndarray, topo: EdgeTopology = None):
             rows.append((3 * f1 + k1)[same])
             cols.append((3 * f2 + k2)[same])
     rows, cols = np.concatenate(rows), np.concatenate(cols)
-    graph = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
-    _, labels = connected_components(graph, directed=False)
+    compiled = load_kernels("meshing.mesh_ops_kernels")
+    if compiled is not None:  # a union-find: the same labels, without a sparse graph
+        labels = compiled.pair_components(3 * m, rows.astype(np.int64, copy=False),
+                                          cols.astype(np.int64, copy=False))
+    else:
+        graph = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+        _, labels = connected_components(graph, directed=False)
     labels = labels.reshape(m, 3)
     fan_vertex = np.zeros(labels.max() + 1 if m else 0, dtype=np.int64)
     fan_vertex[labels.reshape(-1)] = faces.reshape(-1)

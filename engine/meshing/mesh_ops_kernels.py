@@ -6,7 +6,8 @@ bucket, a vertex's few edges, is ordered by the larger one. :func:`facing_candid
 :func:`.layers._candidates` gives after its neighbour search (the pairs that face apart, with
 depth and lateral offset), in one pass over the neighbour lists instead of a dozen array passes
 over all of them. :func:`vertex_components` gives what :func:`.mesh_ops.vertex_components`
-gives, by a union-find over the vertices instead of a sparse graph of the faces' edges.
+gives, by a union-find over the vertices instead of a sparse graph of the faces' edges, and
+:func:`pair_components` the corners' fans of :func:`.mesh_ops.vertex_fans` the same way.
 """
 
 import numba
@@ -137,6 +138,32 @@ def component_count(n, faces):
     for i in range(faces.shape[0]):
         root[_root(parent, faces[i, 0])] = True
     return int(root.sum())
+
+
+@numba.njit(nogil=True, cache=True)
+def pair_components(n, a, b):
+    """Connected components of ``n`` nodes joined by the pairs ``(a[i], b[i])``: each node's
+    label, numbered in the order of each component's lowest node (as scipy's
+    ``connected_components`` numbers them)."""
+    parent = np.arange(n)
+    for i in range(a.shape[0]):
+        x = _root(parent, a[i])
+        y = _root(parent, b[i])
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    # a node's parent is a lower node (or itself, at a root): in ascending order, each parent
+    # already holds its component's number when its children are reached
+    count = 0
+    for v in range(n):
+        up = parent[v]
+        if up == v:
+            parent[v] = count
+            count += 1
+        else:
+            parent[v] = parent[up]
+    return parent
 
 
 @numba.njit(nogil=True, cache=True)

@@ -143,6 +143,25 @@ def test_compiled_vertex_components_equal_the_numpy_ones(monkeypatch):
     assert counted == [count for count, _ in want]  # the count alone, without the labels
 
 
+def test_compiled_vertex_fans_equal_the_numpy_ones(monkeypatch):
+    """The corners' fans, by union-find and by scipy's sparse graph: the same labels, on a
+    grid with bow-ties (pieces meeting at one vertex) and a fin on a shared edge."""
+    n = 30
+    index = np.arange(n * n).reshape(n, n)
+    quads = np.stack([index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]], -1)
+    quads = quads.reshape(-1, 4)
+    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    rng = np.random.default_rng(3)
+    faces = faces[rng.random(len(faces)) > 0.3]  # holes: many vertices with several fans
+    fin = np.array([[faces[0, 0], faces[0, 1], n * n]])  # a third face on an edge
+    faces = np.concatenate([faces, fin])
+    got_labels, got_fans = mo.vertex_fans(n * n + 1, faces)
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    want_labels, want_fans = mo.vertex_fans(n * n + 1, faces)
+    assert want_fans.max() >= 2
+    assert np.array_equal(got_labels, want_labels) and np.array_equal(got_fans, want_fans)
+
+
 def test_compiled_twin_candidates_equal_the_numpy_ones(monkeypatch):
     """The opposite-facing neighbours of a double cover's faces, compiled and in numpy."""
     from scipy.spatial import cKDTree
