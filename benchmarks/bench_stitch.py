@@ -4,15 +4,18 @@
         [--tile-cells 64 128] [--workers 2]
 
 For each tile size: reconstructs the cloud in tiles, keeps the tiles' pieces as the stitcher
-received them, then stitches them again under tracemalloc and prints the faces, the seam's share
-of them (the faces stitching may change, with the faces around them: ``engine.tiles._seam``),
-the seconds, and the peak of numpy's allocations above the pieces it is handed (which it frees
-as it reads them), in MB and per face.
+received them (each tile's seam in memory, the rest in a file: ``engine.tiles.TilePiece``), then
+stitches them again under tracemalloc and prints the faces, the seam's share of them (the faces
+stitching may change, with the faces around them), the seconds, and the peak of numpy's
+allocations above the seams it is handed, output included, in MB and per face.
 """
 
 import argparse
+import dataclasses
 import os
+import shutil
 import sys
+import tempfile
 import time
 import tracemalloc
 
@@ -34,32 +37,37 @@ def main():
     stitch = tiles.stitch
     print("tile cells | tiles | faces | seam share | stitch s | peak MB | bytes / face")
     for cells in args.tile_cells:
-        captured = []
+        with tempfile.TemporaryDirectory() as folder:
+            captured = []
 
-        def capture(pieces, tile_list, spacing, min_component_faces=0):
-            captured.append((list(pieces), tile_list, spacing))
-            return stitch(pieces, tile_list, spacing, min_component_faces)
+            def capture(pieces, tile_list, spacing, min_component_faces=0):
+                # the tiles' files go with the reconstruction's folder: keep copies
+                kept = []
+                for number, piece in enumerate(pieces):
+                    path = os.path.join(folder, f"tile{number}.npz")
+                    shutil.copy(piece.rest.stored, path)
+                    kept.append(dataclasses.replace(
+                        piece, rest=tiles.TileRest(piece.rest.piece_rest, path)))
+                captured.append((kept, tile_list, spacing))
+                return stitch(pieces, tile_list, spacing, min_component_faces)
 
-        tiles.stitch = capture
-        try:
-            reconstruct(cloud, {"resolution": args.resolution, "tile_cells": cells,
-                                "workers": args.workers})
-        finally:
-            tiles.stitch = stitch
-        pieces, tile_list, spacing = captured[-1]
-        faces = sum(len(f) for _, f in pieces)
-        seam = len(tiles._seam(pieces, tile_list, spacing).faces)
-        tracemalloc.start()
-        # copies made under tracemalloc, handed over: the stitcher frees each tile's arrays
-        # once read, and the peak counts that
-        given = [(v.copy(), f.copy()) for v, f in pieces]
-        base = tracemalloc.get_traced_memory()[0]
-        start = time.perf_counter()
-        stitch(given, tile_list, spacing)
-        seconds = time.perf_counter() - start
-        peak = tracemalloc.get_traced_memory()[1] - base
-        tracemalloc.stop()
-        print(f"{cells} | {len(pieces)} | {faces:,} | {100 * seam / faces:.0f} % | "
+            tiles.stitch = capture
+            try:
+                reconstruct(cloud, {"resolution": args.resolution, "tile_cells": cells,
+                                    "workers": args.workers})
+            finally:
+                tiles.stitch = stitch
+            pieces, tile_list, spacing = captured[-1]
+            faces = sum(int(piece.piece_faces.sum()) for piece in pieces)
+            seam = len(tiles._seam(pieces, spacing).faces)
+            tracemalloc.start()
+            base = tracemalloc.get_traced_memory()[0]
+            start = time.perf_counter()
+            stitch(pieces, tile_list, spacing)
+            seconds = time.perf_counter() - start
+            peak = tracemalloc.get_traced_memory()[1] - base
+            tracemalloc.stop()
+        print(f"{cells} | {len(tile_list)} | {faces:,} | {100 * seam / faces:.0f} % | "
               f"{seconds:.1f} | {peak / 2 ** 20:.0f} | {peak / faces:.0f}", flush=True)
 
 

@@ -41,9 +41,9 @@ def available_cores() -> int:
 
 def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: int = 1,
               scheduler: str = "", progress: Optional[ProgressFn] = None,
-              cancel: Optional[CancelFn] = None, costs: Optional[Sequence[float]] = None
-              ) -> List:
-    """``[task(*job(i)) for i in range(count)]``, in order, run as asked.
+              cancel: Optional[CancelFn] = None, costs: Optional[Sequence[float]] = None,
+              keep: Optional[Callable[[int, object], object]] = None) -> List:
+    """``[keep(i, task(*job(i))) for i in range(count)]``, in order, run as asked.
 
     task : a module-level function (it is sent to other processes); in this process it also
         gets ``progress=`` and ``cancel=`` keywords.
@@ -56,21 +56,29 @@ def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: 
         raised.
     costs : an estimate of each tile's work; workers get the costliest tiles first, so that
         the last ones to finish are short (the results keep their order).
+    keep : what to keep of tile ``i``'s result, called in this process as each result arrives
+        (to put its bulk on disk, say); by default the whole result.
     """
     progress = progress or no_progress
+    keep = keep or _whole
     workers = workers or available_cores()
     order = send_order(count, costs)
     if scheduler:
-        return _on_dask(task, order, job, workers, scheduler, progress, cancel)
+        return _on_dask(task, order, job, workers, scheduler, progress, cancel, keep)
     if workers <= 1 or count <= 1 or "bpy" in sys.modules:
         results = []
         for number in range(count):
             check_cancel(cancel)
             part = sub_progress(progress, number / count, (number + 1) / count)
             part(0.0, f"tile {number + 1} of {count}")
-            results.append(task(*job(number), progress=part, cancel=cancel))
+            results.append(keep(number, task(*job(number), progress=part, cancel=cancel)))
         return results
-    return _in_processes(task, order, job, min(workers, count), progress, cancel)
+    return _in_processes(task, order, job, min(workers, count), progress, cancel, keep)
+
+
+def _whole(number: int, result):
+    """The default of what to keep of a tile's result: all of it."""
+    return result
 
 
 def process_peak_bytes() -> int:
@@ -103,9 +111,9 @@ def send_order(count: int, costs: Optional[Sequence[float]] = None) -> List[int]
 
 
 def _windowed(submit: Callable, wait_some: Callable, order: List[int], job, window: int,
-              progress: ProgressFn, cancel: Optional[CancelFn], where: str) -> List:
+              progress: ProgressFn, cancel: Optional[CancelFn], where: str, keep) -> List:
     """Keep ``window`` tiles in flight (``submit(args) -> future``), sent in ``order``;
-    return their results by tile number.
+    return what ``keep(number, result)`` keeps of their results, by tile number.
 
     ``wait_some(futures)`` returns the futures finished within :data:`POLL_SECONDS`.
     """
@@ -119,7 +127,8 @@ def _windowed(submit: Callable, wait_some: Callable, order: List[int], job, wind
             running[submit(job(order[sent]))] = order[sent]
             sent += 1
         for future in wait_some(list(running)):
-            results[running.pop(future)] = future.result()
+            number = running.pop(future)
+            results[number] = keep(number, future.result())
             done += 1
         progress(done / count, f"{done} of {count} tiles done {where}")
     return results
@@ -159,7 +168,7 @@ def _end_with_parent(parent: int) -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
-def _in_processes(task, order, job, workers, progress, cancel) -> List:
+def _in_processes(task, order, job, workers, progress, cancel, keep) -> List:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -171,7 +180,7 @@ def _in_processes(task, order, job, workers, progress, cancel) -> List:
                          lambda futures: wait(futures, timeout=POLL_SECONDS,
                                               return_when=FIRST_COMPLETED)[0],
                          order, job, IN_FLIGHT * workers, progress, cancel,
-                         f"on {workers} workers")
+                         f"on {workers} workers", keep)
     except BrokenProcessPool:
         raise InputError("the worker processes stopped before finishing (out of memory, or a "
                          "script that calls reconstruct() outside `if __name__ == "
@@ -188,7 +197,7 @@ def _in_processes(task, order, job, workers, progress, cancel) -> List:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _on_dask(task, order, job, workers, scheduler, progress, cancel) -> List:
+def _on_dask(task, order, job, workers, scheduler, progress, cancel, keep) -> List:
     try:
         from dask.distributed import Client, LocalCluster, wait
     except ImportError:
@@ -221,7 +230,8 @@ def _on_dask(task, order, job, workers, scheduler, progress, cancel) -> List:
             except TimeoutError:
                 return []
 
-        return _windowed(submit, wait_some, order, job, window, progress, cancel, "on Dask")
+        return _windowed(submit, wait_some, order, job, window, progress, cancel, "on Dask",
+                         keep)
     finally:
         client.cancel([future for future in running if not future.done()])
         client.close()

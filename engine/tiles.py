@@ -24,16 +24,22 @@ faces around them) is welded and tidied; the other faces pass through as they ar
 Tiles are made one after the other in this process, in worker processes or on a Dask cluster
 (:mod:`.tile_runners`), with the same result.
 
-A worker's memory is bounded by the tile size, not the scene; the main process holds the
-tiles' faces, the seam and the output. Time grows with the number of tiles that hold points.
+A worker's memory is bounded by the tile size, not the scene. As each tile's mesh reaches the
+main process it is split (:func:`split_tile`): its seam stays in memory, the rest waits in a
+temporary folder on disk and is read back tile by tile into the output, so the main process
+holds the seams and the output mesh, not the tiles' meshes as well. Time grows with the number
+of tiles that hold points.
 """
 
 import dataclasses
+import os
+import tempfile
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 import numpy as np
 
+from .errors import InputError
 from .progress import CancelFn, ProgressFn, no_progress, sub_progress
 
 AUTO_TILE_CELLS = 192
@@ -102,31 +108,102 @@ def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
 
 
 @dataclass
-class _Seam:
-    """The tiles' kept faces, split into the seam (what stitching may change) and the rest.
+class TilePiece:
+    """One tile's kept faces, split for stitching (:func:`split_tile`).
 
-    The vertices are numbered across the tiles, tile after tile (tile ``t`` from
-    ``offsets[t]``), but kept per tile in ``tile_vertices`` (no joined copy). ``ids``: the
-    joined index of each seam vertex (ascending), ``points`` their positions; ``faces``: the
-    seam's faces over the seam vertices: the zone faces (``zone``: a vertex within
-    :data:`SEAM_CELLS` of their tile's core border) and the faces sharing a vertex with them,
-    so that every edge of a zone face has all of its faces here; ``face_piece``: the piece of
-    each seam face (the pieces are the tiles' own vertex-connected components, numbered across
-    the tiles); ``rest``: per tile, its other faces and their pieces, both numbered within the
-    tile (int32: a third of the joined int64 faces' memory), or None when not asked for;
-    ``piece_first``: per tile, the number of its first piece; ``piece_tile``, ``piece_area``,
-    ``piece_faces``: per piece; ``a``, ``b``: the seam vertices to weld
-    (:func:`_pairs_across`).
+    Held in memory, what stitching reads: the seam's part of the tile. ``seam_ids``: the
+    tile's vertices on the seam's faces (ascending), ``seam_points`` their positions,
+    ``seam_near`` whether each lies within :data:`SEAM_CELLS` of the core's border;
+    ``seam_faces``: the seam's faces, over the positions in ``seam_ids``: the zone faces
+    (``seam_zone``: a vertex near the border) and the faces sharing a vertex with them, so that
+    every edge of a zone face has all of its faces here; ``seam_piece``: their pieces (the
+    tile's vertex-connected components). Per piece: ``piece_area``, ``piece_faces`` and
+    ``piece_rest`` (its faces away from the seam).
+
+    The rest, read only to assemble the output (:meth:`read`): ``vertices`` (all of the
+    tile's), ``faces`` (those away from the seam, int32) and ``pieces`` (theirs, int32), in
+    ``rest`` (:class:`TileRest`).
     """
 
-    tile_vertices: list
+    vertex_count: int
+    seam_ids: np.ndarray
+    seam_points: np.ndarray
+    seam_near: np.ndarray
+    seam_faces: np.ndarray
+    seam_zone: np.ndarray
+    seam_piece: np.ndarray
+    piece_area: np.ndarray
+    piece_faces: np.ndarray
+    rest: "TileRest"
+
+
+@dataclass
+class TileRest:
+    """What of a tile's piece the output reads besides the seam: per piece, its faces away
+    from the seam (``piece_rest``), and the arrays ``vertices``, ``faces`` and ``pieces`` in
+    the ``.npz`` file ``stored`` names, or in ``stored`` (a dict) when split without a file."""
+
+    piece_rest: np.ndarray
+    stored: object
+
+    def read(self, *names: str) -> tuple:
+        """The named arrays (``vertices``, ``faces``, ``pieces``)."""
+        if isinstance(self.stored, dict):
+            return tuple(self.stored[name] for name in names)
+        with np.load(self.stored) as data:
+            return tuple(data[name] for name in names)
+
+
+def split_tile(vertices: np.ndarray, faces: np.ndarray, tile: Tile, spacing: float,
+               path: Optional[str] = None) -> TilePiece:
+    """A tile's kept faces split into its seam (held) and the rest (written to ``path``, an
+    ``.npz`` file, when given; else held too). See :class:`TilePiece`."""
+    from .meshing.mesh_ops import face_normals, vertex_components
+
+    v = np.asarray(vertices, np.float64).reshape(-1, 3)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    count, label = vertex_components(len(v), f) if len(f) else (0, np.zeros(0, np.int64))
+    area = np.bincount(label, weights=face_normals(v, f)[1], minlength=count)
+    margin = np.minimum(v - tile.low, tile.high - v).min(axis=1)
+    close = margin < SEAM_CELLS * spacing
+    zone = close[f].any(axis=1)
+    touched = np.zeros(len(v), bool)
+    touched[f[zone]] = True
+    seam = touched[f].any(axis=1)
+    on_seam = np.zeros(len(v), bool)
+    on_seam[f[seam]] = True
+    position = np.cumsum(on_seam) - 1  # of each seam vertex in ``seam_ids``
+    rest = {"vertices": v, "faces": f[~seam].astype(np.int32),
+            "pieces": label[~seam].astype(np.int32)}
+    if path is not None:
+        np.savez(path, **rest)
+        rest = path
+    return TilePiece(len(v), np.flatnonzero(on_seam), v[on_seam], close[on_seam],
+                     position[f[seam]], zone[seam], label[seam], area,
+                     np.bincount(label, minlength=count),
+                     TileRest(np.bincount(label[~seam], minlength=count), rest))
+
+
+@dataclass
+class _Seam:
+    """The seams of all the tiles' pieces (:class:`TilePiece`), joined; ``rests``: the rest of
+    each (:class:`TileRest`).
+
+    The vertices are numbered across the tiles, tile after tile (tile ``t`` from
+    ``offsets[t]``). ``ids``: the joined index of each seam vertex (ascending), ``points``
+    their positions; ``faces``: the seam's faces over the seam vertices, ``zone`` and
+    ``face_piece`` theirs (the pieces numbered across the tiles: tile ``t``'s from
+    ``piece_first[t]``); ``piece_tile``, ``piece_area``, ``piece_faces``: per piece; ``a``,
+    ``b``: the seam vertices to weld (:func:`_pairs_across`).
+    """
+
+    rests: list
     offsets: np.ndarray
     ids: np.ndarray
     points: np.ndarray
     faces: np.ndarray
     zone: np.ndarray
     face_piece: np.ndarray
-    rest: Optional[list]
     piece_first: np.ndarray
     piece_tile: np.ndarray
     piece_area: np.ndarray
@@ -135,58 +212,27 @@ class _Seam:
     b: np.ndarray
 
 
-def _seam(pieces, tiles, spacing: float, consume: bool = False) -> _Seam:
-    """Split the tiles' kept faces ``pieces`` (``(vertices, faces)`` per tile of ``tiles``).
+def _split_all(pieces, tiles, spacing: float) -> list:
+    """The pieces as :class:`TilePiece` (those given as ``(vertices, faces)`` split, held)."""
+    return [piece if isinstance(piece, TilePiece) else split_tile(*piece, tile, spacing)
+            for piece, tile in zip(pieces, tiles)]
 
-    ``consume``: empty the list ``pieces`` as it is read, keep each tile's vertices and its
-    faces away from the seam (``rest``), and free the rest of each tile's arrays once split
-    (the caller must hold no other reference to them). Without it, only the seam is kept.
-    """
-    from .meshing.mesh_ops import edge_topology, face_normals, vertex_components
 
-    offsets = np.cumsum([0] + [len(v) for v, _ in pieces])
-    given = list(pieces)
-    if consume:
-        pieces.clear()  # the tiles' arrays now live in ``given`` only
-    tile_vertices = []
-    seam_faces, seam_zone, seam_piece, rest = [], [], [], []
-    seam_points, seam_near = [], []
-    piece_tile, piece_area, piece_faces, piece_first = [], [], [], []
-    first = 0
-    for number, tile in enumerate(tiles):
-        v, f = given[number]
-        given[number] = None
-        v = np.asarray(v, np.float64).reshape(-1, 3)
-        f = np.asarray(f, np.int64).reshape(-1, 3)
-        count, label = vertex_components(len(v), f) if len(f) else (0, np.zeros(0, np.int64))
-        piece_first.append(first)
-        piece_tile.append(np.full(count, number, np.int64))
-        piece_area.append(np.bincount(label, weights=face_normals(v, f)[1], minlength=count))
-        piece_faces.append(np.bincount(label, minlength=count))
-        margin = np.minimum(v - tile.low, tile.high - v).min(axis=1)
-        close = margin < SEAM_CELLS * spacing
-        zone = close[f].any(axis=1)
-        touched = np.zeros(len(v), bool)
-        touched[f[zone]] = True
-        seam = touched[f].any(axis=1)
-        on_seam = np.zeros(len(v), bool)
-        on_seam[f[seam]] = True
-        seam_points.append(v[on_seam])  # in the order of ``ids``: ascending within the tile
-        seam_near.append(close[on_seam])
-        seam_faces.append(f[seam] + offsets[number])
-        seam_zone.append(zone[seam])
-        seam_piece.append(label[seam] + first)
-        if consume:
-            tile_vertices.append(v)
-            rest.append((f[~seam].astype(np.int32), label[~seam].astype(np.int32)))
-        first += count
-        del v, f, label, seam, zone, touched, on_seam
-    ids, local = np.unique(np.concatenate(seam_faces + [np.zeros((0, 3), np.int64)]),
-                           return_inverse=True)
-    faces = local.reshape(-1, 3)
-    points = np.concatenate(seam_points + [np.zeros((0, 3))])
-    near = np.concatenate(seam_near + [np.zeros(0, bool)])
+def _seam(pieces: list, spacing: float) -> _Seam:
+    """The tiles' seams (``pieces``: a :class:`TilePiece` per tile) joined, and the pairs of
+    their open vertices to weld."""
+    from .meshing.mesh_ops import edge_topology
+
+    offsets = np.cumsum([0] + [piece.vertex_count for piece in pieces])
+    seam_first = np.cumsum([0] + [len(piece.seam_ids) for piece in pieces])
+    piece_first = np.cumsum([0] + [len(piece.piece_area) for piece in pieces])[:-1]
     empty = np.zeros(0, np.int64)
+    ids = np.concatenate([piece.seam_ids + offsets[t] for t, piece in enumerate(pieces)]
+                         + [empty])
+    faces = np.concatenate([piece.seam_faces + seam_first[t] for t, piece in enumerate(pieces)]
+                           + [np.zeros((0, 3), np.int64)])
+    points = np.concatenate([piece.seam_points for piece in pieces] + [np.zeros((0, 3))])
+    near = np.concatenate([piece.seam_near for piece in pieces] + [np.zeros(0, bool)])
     a = b = empty
     if len(faces):
         topo = edge_topology(faces)
@@ -195,23 +241,26 @@ def _seam(pieces, tiles, spacing: float, consume: bool = False) -> _Seam:
         tile_of = np.searchsorted(offsets, ids[rim], side="right") - 1
         i, j = _pairs_across(points[rim], tile_of, spacing)
         a, b = rim[i], rim[j]
-    return _Seam(tile_vertices, offsets, ids, points, faces,
-                 np.concatenate(seam_zone + [np.zeros(0, bool)]),
-                 np.concatenate(seam_piece + [empty]), rest if consume else None,
-                 np.asarray(piece_first, np.int64), np.concatenate(piece_tile + [empty]),
-                 np.concatenate(piece_area + [np.zeros(0)]), np.concatenate(piece_faces + [empty]),
-                 a, b)
+    return _Seam([piece.rest for piece in pieces], offsets, ids, points, faces,
+                 np.concatenate([piece.seam_zone for piece in pieces] + [np.zeros(0, bool)]),
+                 np.concatenate([piece.seam_piece + piece_first[t]
+                                 for t, piece in enumerate(pieces)] + [empty]),
+                 piece_first,
+                 np.concatenate([np.full(len(piece.piece_area), t, np.int64)
+                                 for t, piece in enumerate(pieces)] + [empty]),
+                 np.concatenate([piece.piece_area for piece in pieces] + [np.zeros(0)]),
+                 np.concatenate([piece.piece_faces for piece in pieces] + [empty]), a, b)
 
 
 def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
-    """One mesh from the tiles' kept faces: ``pieces`` is a list of ``(vertices, faces)``, one
-    per tile of ``tiles``. The list is emptied as it is read, so that a tile's arrays are freed
-    once split (pass a copy of the list to keep them).
+    """One mesh from the tiles' kept faces: ``pieces`` is a list with, per tile of ``tiles``,
+    its :class:`TilePiece` or its ``(vertices, faces)``. The list is emptied as it is read.
 
-    Only the seam (:class:`_Seam`) is welded and tidied: each tile's own mesh is already clean,
-    so the faces away from its core's border pass through unchanged, and memory beyond the
-    output follows the seam, not the scene. ``min_component_faces``: drop pieces (joined
-    across the tiles) with fewer faces.
+    Only the seam (:class:`TilePiece`) is welded and tidied: each tile's own mesh is already
+    clean, so the faces away from its core's border pass through unchanged, read tile by tile
+    (from disk, for pieces split with a file) into the output: memory beyond the output
+    follows the seam, not the scene. ``min_component_faces``: drop pieces (joined across the
+    tiles) with fewer faces.
 
     Returns
     -------
@@ -224,7 +273,10 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     from .meshing.layers import close_pinholes
     from .meshing.mesh_ops import face_normals, split_nonmanifold_vertices, vertex_components
 
-    seam = _seam(pieces, tiles, spacing, consume=True)
+    given = _split_all(pieces, tiles, spacing)
+    pieces.clear()
+    seam = _seam(given, spacing)
+    del given
     stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0,
              "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
              "cleanup_small_pieces": 0}
@@ -323,28 +375,27 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
     was, left out where it was ``dropped``) and the stitched seam ``faces`` over its vertices
     ``local`` (the seam's vertices, welded, then any copies); unused vertices removed.
 
-    The output's faces and vertices are filled in place tile by tile, each tile's arrays freed
-    once copied, and renumbered in place, so the peak is about the output and the seam, not
-    several copies of the scene.
+    The output's faces, then its vertices, are filled in place tile by tile, each tile's rest
+    read when its turn comes, and renumbered in place, so the peak is about the output and the
+    seam, not several copies of the scene.
     """
     n, s = int(seam.offsets[-1]), len(seam.ids)
     lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
     seam_faces = lookup[faces]
-    kept = []
-    for (rest, piece), first in zip(seam.rest, seam.piece_first):
-        kept.append(~dropped[first + piece])
-    out = np.empty((sum(int(k.sum()) for k in kept) + len(seam_faces), 3), np.int64)
+    kept_count = sum(int(rest.piece_rest[~dropped[first:first + len(rest.piece_rest)]].sum())
+                     for rest, first in zip(seam.rests, seam.piece_first))
+    out = np.empty((kept_count + len(seam_faces), 3), np.int64)
     at = 0
     for number, first in enumerate(seam.piece_first):
-        rest, piece = seam.rest[number]
-        seam.rest[number] = None
-        rest, piece = rest[kept[number]], piece[kept[number]]
+        rest, label = seam.rests[number].read("faces", "pieces")
+        kept = ~dropped[first + label]
+        rest, label = rest[kept], label[kept]
         block = out[at:at + len(rest)]
         np.add(rest, seam.offsets[number], out=block)
-        turn = np.flatnonzero(flip[first + piece])
+        turn = np.flatnonzero(flip[first + label])
         block[turn] = block[turn][:, ::-1]
         at += len(rest)
-        del rest, piece, block
+        del rest, label, kept, block
     out[at:] = seam_faces
     del seam_faces
     used = np.zeros(n + len(local) - s, bool)
@@ -352,8 +403,8 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
     count = int(used.sum())
     result = np.empty((count, 3))
     at = 0
-    for number, vertices in enumerate(seam.tile_vertices):
-        seam.tile_vertices[number] = None  # each tile's vertices freed once copied
+    for number, rest in enumerate(seam.rests):
+        vertices, = rest.read("vertices")
         low, high = seam.offsets[number], seam.offsets[number + 1]
         used_here = used[low:high]
         block = result[at:at + int(used_here.sum())]
@@ -374,8 +425,9 @@ def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarra
 
 def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
     """Indices of the tiles whose kept layer faces against their neighbours' across the
-    borders (by the votes of :func:`_piece_flips`): the smaller side, by area."""
-    seam = _seam(pieces, tiles, spacing)
+    borders (by the votes of :func:`_piece_flips`): the smaller side, by area. ``pieces``:
+    per tile, its :class:`TilePiece` or its ``(vertices, faces)``."""
+    seam = _seam(_split_all(pieces, tiles, spacing), spacing)
     if not len(seam.a):
         return np.zeros(0, np.int64)
     flip = _piece_flips(seam.points, seam.faces, seam.face_piece,
@@ -578,9 +630,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
         ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
-    from .tile_runners import available_cores
-
-    from .tile_runners import run_tiles
+    from .tile_runners import available_cores, run_tiles
 
     progress = progress or no_progress
     spacing = 1.0 / settings.resolution
@@ -595,42 +645,53 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
 
     # a tile's work follows the points it reads: workers take the largest tiles first
     costs = [len(tile_points(points, tile, reach)) for tile in tiles]
-    results = run_tiles(mesh_tile, len(tiles), job, settings.workers, settings.scheduler,
-                        sub_progress(progress, 0.0, 0.85), cancel, costs)
-    # where a tile kept the other side of an open sheet than its neighbours, make it again
-    # keeping the side they kept: the two sides share no vertices along the border
-    turn = tiles_to_turn([(v, f) for v, f, _ in results], tiles, spacing)
-    tile_peak = max(band["peak_bytes"] for _, _, band in results)
-    if len(turn):
-        other = dataclasses.replace(meshing, other_side=not meshing.other_side)
+    with tempfile.TemporaryDirectory(prefix="udf-tiles-") as folder:
 
-        def again(number: int) -> tuple:
-            return job(int(turn[number]))[:4] + (other, udf_source)
+        def keep(number: int, result: tuple, side: str = "") -> tuple:
+            """A tile's mesh: its seam here, the rest on disk; and its numbers."""
+            vertices, faces, band = result
+            path = os.path.join(folder, f"tile{number}{side}.npz")
+            try:
+                return split_tile(vertices, faces, tiles[number], spacing, path), band
+            except OSError as error:
+                raise InputError(f"could not write a tile's mesh to the temporary folder "
+                                 f"{folder}: {error}; free some disk space there or set TMPDIR "
+                                 f"to a folder with room") from None
 
-        redone = run_tiles(mesh_tile, len(turn), again, settings.workers, settings.scheduler,
-                           sub_progress(progress, 0.85, 0.95), cancel,
-                           [costs[int(number)] for number in turn])
-        for number, result in zip(turn, redone):
-            results[number] = result
-            tile_peak = max(tile_peak, result[2]["peak_bytes"])
-        del redone, result
-    pieces = []
-    sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
-    patch_points = 0.0
-    device = "none"
-    isos = []
-    for number, (vertices, faces, band) in enumerate(results):
-        isos.append(band["iso"])
-        pieces.append((vertices, faces))
-        results[number] = None  # the stitcher frees each tile's arrays once it has read them
-        for key in sums:
-            sums[key] += int(band.get(key, 0))
-        seen = band.get("network_queries", 0) - band["sparse_balls"]
-        patch_points += band["mean_patch_points"] * seen
-        device = band["device"]
-    del vertices, faces
-    progress(0.95, f"stitching {len(tiles)} tiles")
-    vertices, faces, stitched = stitch(pieces, tiles, spacing, meshing.min_component_faces)
+        results = run_tiles(mesh_tile, len(tiles), job, settings.workers, settings.scheduler,
+                            sub_progress(progress, 0.0, 0.85), cancel, costs, keep)
+        # where a tile kept the other side of an open sheet than its neighbours, make it again
+        # keeping the side they kept: the two sides share no vertices along the border
+        turn = tiles_to_turn([piece for piece, _ in results], tiles, spacing)
+        tile_peak = max(band["peak_bytes"] for _, band in results)
+        if len(turn):
+            other = dataclasses.replace(meshing, other_side=not meshing.other_side)
+
+            def again(number: int) -> tuple:
+                return job(int(turn[number]))[:4] + (other, udf_source)
+
+            redone = run_tiles(mesh_tile, len(turn), again, settings.workers,
+                               settings.scheduler, sub_progress(progress, 0.85, 0.95), cancel,
+                               [costs[int(number)] for number in turn],
+                               lambda number, result: keep(int(turn[number]), result, "-again"))
+            for number, result in zip(turn, redone):
+                results[number] = result
+                tile_peak = max(tile_peak, result[1]["peak_bytes"])
+        sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
+        patch_points = 0.0
+        device = "none"
+        isos = []
+        for _, band in results:
+            isos.append(band["iso"])
+            for key in sums:
+                sums[key] += int(band.get(key, 0))
+            seen = band.get("network_queries", 0) - band["sparse_balls"]
+            patch_points += band["mean_patch_points"] * seen
+            device = band["device"]
+        progress(0.95, f"stitching {len(tiles)} tiles")
+        pieces = [piece for piece, _ in results]
+        del results  # the stitcher frees each tile's seam once joined
+        vertices, faces, stitched = stitch(pieces, tiles, spacing, meshing.min_component_faces)
     seen = sums["network_queries"] - sums["sparse_balls"]
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
                    "workers": settings.workers or available_cores(),

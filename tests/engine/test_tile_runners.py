@@ -29,6 +29,7 @@ def test_costliest_tiles_go_first():
 
 
 def test_results_keep_the_tile_order_whatever_the_sending_order():
+    """And each result is handed to ``keep`` with its own tile's number as it arrives."""
     sent = []
 
     def submit(args):
@@ -37,9 +38,10 @@ def test_results_keep_the_tile_order_whatever_the_sending_order():
 
     order = send_order(4, [1.0, 4.0, 2.0, 3.0])
     results = _windowed(submit, lambda futures: futures[:1], order, lambda number: (number,),
-                        window=2, progress=no_progress, cancel=None, where="here")
+                        window=2, progress=no_progress, cancel=None, where="here",
+                        keep=lambda number, result: (number, result.upper()))
     assert sent == [1, 3, 2, 0]
-    assert results == ["tile 0", "tile 1", "tile 2", "tile 3"]
+    assert results == [(0, "TILE 0"), (1, "TILE 1"), (2, "TILE 2"), (3, "TILE 3")]
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")

@@ -1,5 +1,7 @@
 """Tiled reconstruction: a cloud forced through small tiles comes out as it does in one grid."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -113,6 +115,44 @@ def test_two_workers_give_the_same_mesh_bit_for_bit(small_tiled):
     assert one.stats["tiles"] >= 4 and two.stats["workers"] == 2
     assert np.array_equal(one.mesh.vertices, two.mesh.vertices)
     assert np.array_equal(one.mesh.faces, two.mesh.faces)
+
+
+def test_the_tiles_meshes_wait_on_disk_and_the_folder_is_removed(small_tiled, monkeypatch,
+                                                                  tmp_path):
+    """Each tile's mesh is split as it reaches the main process: its seam held, the rest
+    written to a temporary folder, which is gone once the mesh is made."""
+    import tempfile
+
+    from engine import tiles
+
+    cloud, settings, one = small_tiled
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    split, stored = tiles.split_tile, []
+
+    def spy(*args, **kwargs):
+        piece = split(*args, **kwargs)
+        stored.append(piece.rest.stored)
+        assert os.path.getsize(piece.rest.stored) > 0
+        return piece
+
+    monkeypatch.setattr(tiles, "split_tile", spy)
+    again = reconstruct(cloud, dict(settings, workers=1))
+    assert len(stored) >= one.stats["tiles"]
+    assert all(str(path).startswith(str(tmp_path)) for path in stored)
+    assert list(tmp_path.iterdir()) == []
+    assert np.array_equal(one.mesh.faces, again.mesh.faces)
+
+
+def test_no_room_for_the_tiles_meshes_is_a_clear_error(monkeypatch):
+    from engine.errors import InputError
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    with pytest.raises(InputError, match="free some disk space there or set TMPDIR"):
+        reconstruct(hemisphere_cloud(4_000), dict(detail="resolution", resolution=48,
+                                                  tile_cells=24, workers=1))
 
 
 def test_a_local_dask_cluster_gives_the_same_mesh(small_tiled):
