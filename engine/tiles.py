@@ -117,12 +117,9 @@ class TilePiece:
     ``seam_faces``: the seam's faces, over the positions in ``seam_ids``: the zone faces
     (``seam_zone``: a vertex near the border) and the faces sharing a vertex with them, so that
     every edge of a zone face has all of its faces here; ``seam_piece``: their pieces (the
-    tile's vertex-connected components). Per piece: ``piece_area``, ``piece_faces`` and
-    ``piece_rest`` (its faces away from the seam).
+    tile's vertex-connected components). Per piece: ``piece_area`` and ``piece_faces``.
 
-    The rest, read only to assemble the output (:meth:`read`): ``vertices`` (all of the
-    tile's), ``faces`` (those away from the seam, int32) and ``pieces`` (theirs, int32), in
-    ``rest`` (:class:`TileRest`).
+    The rest, read only to assemble the output: ``rest`` (:class:`TileRest`).
     """
 
     vertex_count: int
