@@ -28,6 +28,7 @@ from .outliers import AUTO_SHARE, AUTO_SHRINK, box_shrink, find_outliers
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress, sub_progress
 from .settings import ReconstructSettings
 
+_NO_FACES = np.zeros((0, 3), np.int64)
 # Share of the progress bar per stage (the field and the mesher take most of the time).
 _OUTLIERS_END = 0.01
 _FIELD_END = 0.6
@@ -44,8 +45,9 @@ GAPPY_SHARE = 0.10
 class ReconstructResult:
     """What a reconstruction produced.
 
-    mesh : Mesh
-        In the input's own coordinates; colours when the input had colours.
+    mesh : Mesh or None
+        In the input's own coordinates; colours when the input had colours. None when
+        :func:`.reconstruct_to_file.reconstruct_to_file` wrote it to the file tile by tile.
     messages : list of str
         Notes for the user (warnings from the mesher, too sparse a cloud, ...).
     timings : dict of str to float
@@ -63,7 +65,7 @@ class ReconstructResult:
         over the tiles, the stitching's in ``meshing``, ``timings["tiles"]`` for field and mesh.
     """
 
-    mesh: Mesh
+    mesh: Optional[Mesh]
     messages: List[str] = field(default_factory=list)
     timings: Dict[str, float] = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
@@ -107,7 +109,11 @@ def reconstruct(cloud: Union[PointCloud, np.ndarray],
 
 
 def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
-                 udf_source: Optional[str]) -> ReconstructResult:
+                 udf_source: Optional[str], write_tiled=None) -> ReconstructResult:
+    """:func:`reconstruct`; ``write_tiled(stitched, frame, colors, tree, progress)``, given,
+    takes a mesh made in tiles as it is stitched (a :class:`.tiles.StitchedMesh`, working
+    frame) and returns ``(pieces, faces of the largest piece)``: the result then has no mesh
+    (:func:`.reconstruct_to_file.reconstruct_to_file`)."""
     from scipy.spatial import cKDTree
 
     from .meshing import MeshingResult, extract_surface
@@ -146,13 +152,21 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     timings["frame"] = time.perf_counter() - started - timings["outliers"]
     check_cancel(cancel)
 
+    written = None
     if tile_cells:
         mark = time.perf_counter()
-        vertices, faces, field_stats, mesh_stats = mesh_in_tiles(
+        consume = None
+        if write_tiled is not None:
+            def consume(stitched, write_progress):
+                counts = (stitched.vertex_count, stitched.face_count)
+                return counts + write_tiled(stitched, frame, colors, tree, write_progress)
+        output, field_stats, mesh_stats = mesh_in_tiles(
             points_unit, settings, meshing_settings(settings), tile_cells, udf_source,
-            sub_progress(progress, 0.01, _MESH_END), cancel)
+            sub_progress(progress, 0.01, _MESH_END), cancel, consume)
         timings["tiles"] = time.perf_counter() - mark
-        meshed = MeshingResult(Mesh(vertices, faces), mesh_stats.pop("iso"), {}, [], mesh_stats)
+        written = output if consume is not None else None
+        mesh = Mesh(*output) if written is None else Mesh(np.zeros((0, 3)), _NO_FACES)
+        meshed = MeshingResult(mesh, mesh_stats.pop("iso"), {}, [], mesh_stats)
     else:
         band = compute_udf_band(points_unit, settings, sub_progress(progress, 0.01, _FIELD_END),
                                 cancel, udf_source=udf_source, tree=tree)
@@ -168,19 +182,14 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     check_cancel(cancel)
 
     mark = time.perf_counter()
-    progress(_MESH_END, "mapping the mesh back to the input's coordinates")
-    mesh = meshed.mesh
-    vertices_unit = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-    out_colors = None
-    if colors is not None and len(vertices_unit):
-        _, nearest = tree.query(vertices_unit, k=1, workers=query_threads())
-        out_colors = np.asarray(colors, dtype=np.float32)[nearest]
-    # a similarity transform leaves unit normals unchanged; the stitched tiles' vertices are
-    # this function's own, mapped in place
-    result_mesh = Mesh(frame.from_unit(vertices_unit, in_place=bool(tile_cells)),
-                       np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3),
-                       None if mesh.normals is None else np.asarray(mesh.normals, np.float64),
-                       out_colors)
+    result_mesh = None
+    if written is None:
+        progress(_MESH_END, "mapping the mesh back to the input's coordinates")
+        result_mesh = _in_input_frame(meshed.mesh, frame, colors, tree, bool(tile_cells))
+        counts = (len(result_mesh.vertices), len(result_mesh.faces),
+                  _piece_count(result_mesh))
+    else:
+        counts = written[:3]
     timings["finish"] = time.perf_counter() - mark
     timings["total"] = time.perf_counter() - started
 
@@ -189,8 +198,8 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
              "outliers_found": outliers_found, **field_stats,
              "queries": (field_stats["network_queries"] - field_stats["sparse_balls"]
                          if udf_source == "network" else 0),
-             "iso": float(meshed.iso), "components": _piece_count(result_mesh),
-             "vertices": int(len(result_mesh.vertices)), "faces": int(len(result_mesh.faces)),
+             "iso": float(meshed.iso), "components": int(counts[2]),
+             "vertices": int(counts[0]), "faces": int(counts[1]),
              "meshing": dict(meshed.stats), "meshing_notes": list(meshed.details)}
     timings.update({f"meshing_{stage}": seconds for stage, seconds in meshed.timings.items()})
     messages = list(meshed.messages)
@@ -222,6 +231,28 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
         messages.append("the mesh is empty: try a larger radius or a lower resolution")
     progress(1.0, f"done: {stats['vertices']:,} vertices, {stats['faces']:,} faces")
     return ReconstructResult(result_mesh, messages, timings, stats)
+
+
+def _in_input_frame(mesh: Mesh, frame, colors, tree, own: bool) -> Mesh:
+    """The mesh (working frame) in the input's coordinates, with the colour of the nearest
+    input point at each vertex when the input has colours; ``own``: its vertices are this
+    function's to map in place."""
+    vertices_unit = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    out_colors = None
+    if colors is not None and len(vertices_unit):
+        out_colors = nearest_colors(vertices_unit, colors, tree)
+    # a similarity transform leaves unit normals unchanged
+    return Mesh(frame.from_unit(vertices_unit, in_place=own),
+                np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3),
+                None if mesh.normals is None else np.asarray(mesh.normals, np.float64),
+                out_colors)
+
+
+def nearest_colors(vertices_unit: np.ndarray, colors, tree) -> np.ndarray:
+    """The colour (float32) of the input point nearest each vertex (working frame; ``tree``:
+    the k-d tree of the input points there)."""
+    _, nearest = tree.query(vertices_unit, k=1, workers=query_threads())
+    return np.asarray(colors, dtype=np.float32)[nearest]
 
 
 def _drop_outliers(points: np.ndarray, colors, settings: ReconstructSettings,

@@ -26,9 +26,10 @@ Tiles are made one after the other in this process, in worker processes or on a 
 
 A worker's memory is bounded by the tile size, not the scene. As each tile's mesh reaches the
 main process it is split (:func:`split_tile`): its seam stays in memory, the rest waits in a
-temporary folder on disk and is read back tile by tile into the output, so the main process
-holds the seams and the output mesh, not the tiles' meshes as well. Time grows with the number
-of tiles that hold points.
+temporary folder on disk and is read back tile by tile into the output
+(:class:`StitchedMesh`): into memory, or straight into a file
+(:mod:`.reconstruct_to_file`), when the main process holds the seams and one tile, never the
+whole mesh. Time grows with the number of tiles that hold points.
 """
 
 import dataclasses
@@ -250,6 +251,17 @@ def _seam(pieces: list, spacing: float) -> _Seam:
 
 
 def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
+    """One mesh from the tiles' kept faces, in memory: :func:`stitched_mesh`'s arrays.
+
+    Returns
+    -------
+    vertices : (n, 3) float64; faces : (m, 3) int64; stats : dict, as :func:`stitched_mesh`
+    """
+    stitched, stats = stitched_mesh(pieces, tiles, spacing, min_component_faces)
+    return stitched.arrays() + (stats,)
+
+
+def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
     """One mesh from the tiles' kept faces: ``pieces`` is a list with, per tile of ``tiles``,
     its :class:`TilePiece` or its ``(vertices, faces)``. The list is emptied as it is read.
 
@@ -261,7 +273,7 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
 
     Returns
     -------
-    vertices : (n, 3) float64; faces : (m, 3) int64
+    stitched : :class:`StitchedMesh`, to be read while the pieces' files exist
     stats : dict with ``welded`` vertices, ``flipped`` pieces, ``ears_dropped`` faces,
         ``holes_closed``, and the clean-up's ``cleanup_degenerate``, ``cleanup_split_vertices``,
         ``cleanup_specks`` and ``cleanup_small_pieces``
@@ -281,7 +293,7 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     local = seam.points
     flip = np.zeros(len(seam.piece_tile), bool)
     if not len(faces):  # no surface near a border: nothing to stitch
-        return _assemble(seam, local, faces, flip, flip) + (stats,)
+        return StitchedMesh(seam, local, faces, flip, flip), stats
     if len(seam.a):
         flip = _piece_flips(local, faces, piece, len(flip), seam.a, seam.b)
         stats["flipped"] = int(flip.sum())
@@ -327,7 +339,7 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     if min_component_faces > 0:
         small = _small_pieces(seam, faces, piece, min_component_faces)
         stats["cleanup_small_pieces"] = int(small.sum())
-    return _assemble(seam, local, faces[~small[piece]], flip, small) + (stats,)
+    return StitchedMesh(seam, local, faces[~small[piece]], flip, small), stats
 
 
 def _ears_kept(faces: np.ndarray, may_drop: np.ndarray, passes: int = 3):
@@ -366,58 +378,83 @@ def _small_pieces(seam: _Seam, faces: np.ndarray, piece: np.ndarray, min_faces: 
     return size[label[:count]] < min_faces
 
 
-def _assemble(seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarray,
-              dropped: np.ndarray):
-    """The whole mesh: every tile's faces away from the seam (turned over where their piece
-    was, left out where it was ``dropped``) and the stitched seam ``faces`` over its vertices
-    ``local`` (the seam's vertices, welded, then any copies); unused vertices removed.
+class StitchedMesh:
+    """The whole stitched mesh, read tile by tile (working frame): every tile's faces away from
+    the seam (turned over where their piece was, left out where it was ``dropped``) and the
+    stitched seam ``faces`` over its vertices ``local`` (the seam's vertices, welded, then any
+    copies); unused vertices left out.
 
-    The output's faces, then its vertices, are filled in place tile by tile, each tile's rest
-    read when its turn comes, and renumbered in place, so the peak is about the output and the
-    seam, not several copies of the scene.
+    ``vertex_count`` and ``face_count`` are known at once; :meth:`vertex_blocks` and
+    :meth:`face_blocks` yield the output in order, a tile at a time, each tile's rest read from
+    where :func:`split_tile` put it, so a writer holds the seam and one tile, never the whole
+    mesh. :meth:`arrays` gathers it into memory. Read it while the tiles' files exist.
     """
-    n, s = int(seam.offsets[-1]), len(seam.ids)
-    lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
-    seam_faces = lookup[faces]
-    kept_count = sum(int(rest.piece_rest[~dropped[first:first + len(rest.piece_rest)]].sum())
-                     for rest, first in zip(seam.rests, seam.piece_first))
-    out = np.empty((kept_count + len(seam_faces), 3), np.int64)
-    at = 0
-    for number, first in enumerate(seam.piece_first):
-        rest, label = seam.rests[number].read("faces", "pieces")
-        kept = ~dropped[first + label]
-        rest, label = rest[kept], label[kept]
-        block = out[at:at + len(rest)]
-        np.add(rest, seam.offsets[number], out=block)
-        turn = np.flatnonzero(flip[first + label])
-        block[turn] = block[turn][:, ::-1]
-        at += len(rest)
-        del rest, label, kept, block
-    out[at:] = seam_faces
-    del seam_faces
-    used = np.zeros(n + len(local) - s, bool)
-    used[out.reshape(-1)] = True
-    count = int(used.sum())
-    result = np.empty((count, 3))
-    at = 0
-    for number, rest in enumerate(seam.rests):
-        vertices, = rest.read("vertices")
-        low, high = seam.offsets[number], seam.offsets[number + 1]
-        used_here = used[low:high]
-        block = result[at:at + int(used_here.sum())]
-        np.compress(used_here, vertices, axis=0, out=block)
-        where = slice(*np.searchsorted(seam.ids, [low, high]))  # the tile's seam vertices
-        moved = seam.ids[where] - low
-        still = used_here[moved]
-        block[(np.cumsum(used_here) - 1)[moved[still]]] = local[where][still]
-        at += len(block)
-        del vertices, block
-    np.compress(used[n:], local[s:], axis=0, out=result[at:])
-    remap = np.cumsum(used, dtype=np.int64)
-    remap -= 1
-    flat = out.reshape(-1)
-    np.take(remap, flat, out=flat, mode="clip")
-    return result, out
+
+    def __init__(self, seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarray,
+                 dropped: np.ndarray):
+        self.seam, self.local, self.flip, self.dropped = seam, local, flip, dropped
+        n, s = int(seam.offsets[-1]), len(seam.ids)
+        lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
+        self.seam_faces = lookup[faces]  # numbered across the tiles, copies after them
+        del lookup
+        self.used = np.zeros(n + len(local) - s, bool)
+        self.face_count = len(self.seam_faces)
+        for number, rest, label in self._rests():
+            self.used[rest.reshape(-1) + seam.offsets[number]] = True
+            self.face_count += len(rest)
+        self.used[self.seam_faces.reshape(-1)] = True
+        self.vertex_count = int(self.used.sum())
+
+    def _rests(self):
+        """Per tile: its number, and its kept rest faces (tile numbering) and their pieces."""
+        for number, first in enumerate(self.seam.piece_first):
+            rest, label = self.seam.rests[number].read("faces", "pieces")
+            kept = ~self.dropped[first + label]
+            yield number, rest[kept], label[kept] + first
+
+    def vertex_blocks(self):
+        """The output's vertices (float64, working frame), a tile's at a time."""
+        seam, used, local = self.seam, self.used, self.local
+        for number, rest in enumerate(seam.rests):
+            vertices, = rest.read("vertices")
+            low, high = seam.offsets[number], seam.offsets[number + 1]
+            used_here = used[low:high]
+            block = vertices[used_here]
+            del vertices
+            where = slice(*np.searchsorted(seam.ids, [low, high]))  # the tile's seam vertices
+            moved = seam.ids[where] - low
+            still = used_here[moved]
+            block[(np.cumsum(used_here) - 1)[moved[still]]] = local[where][still]
+            yield block
+        n, s = int(seam.offsets[-1]), len(seam.ids)
+        yield local[s:][used[n:]]
+
+    def face_blocks(self):
+        """The output's faces (int64, over the output's vertices), a tile's at a time, then
+        the seam's."""
+        big = len(self.used) >= 2 ** 31
+        remap = np.cumsum(self.used, dtype=np.int64 if big else np.int32)
+        remap -= 1
+        for number, rest, label in self._rests():
+            block = remap[rest + self.seam.offsets[number]].astype(np.int64)
+            turn = np.flatnonzero(self.flip[label])
+            block[turn] = block[turn][:, ::-1]
+            yield block
+        yield remap[self.seam_faces].astype(np.int64)
+
+    def arrays(self):
+        """``(vertices (n, 3) float64, faces (m, 3) int64)``: the whole mesh in memory."""
+        vertices = np.empty((self.vertex_count, 3))
+        at = 0
+        for block in self.vertex_blocks():
+            vertices[at:at + len(block)] = block
+            at += len(block)
+        faces = np.empty((self.face_count, 3), np.int64)
+        at = 0
+        for block in self.face_blocks():
+            faces[at:at + len(block)] = block
+            at += len(block)
+        return vertices, faces
 
 
 def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
@@ -614,12 +651,15 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
 
 def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                   udf_source: str = "network", progress: Optional[ProgressFn] = None,
-                  cancel: Optional[CancelFn] = None):
+                  cancel: Optional[CancelFn] = None, consume=None):
     """One mesh of a cloud (working frame) made tile by tile (see the module docstring).
+
+    ``consume(stitched, progress)``, given, reads the :class:`StitchedMesh` (to write it to a
+    file block by block, say) while the tiles' files exist; its return value is the output.
 
     Returns
     -------
-    vertices : (n, 3) float64; faces : (m, 3) int64
+    output : ``(vertices (n, 3) float64, faces (m, 3) int64)``, or what ``consume`` returned
     field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
         ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``,
         ``tile_peak_bytes`` (the largest peak memory of a process that ran tiles: a worker's,
@@ -688,7 +728,10 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         progress(0.95, f"stitching {len(tiles)} tiles")
         pieces = [piece for piece, _ in results]
         del results  # the stitcher frees each tile's seam once joined
-        vertices, faces, stitched = stitch(pieces, tiles, spacing, meshing.min_component_faces)
+        mesh, stitched = stitched_mesh(pieces, tiles, spacing, meshing.min_component_faces)
+        output = (consume(mesh, sub_progress(progress, 0.97, 1.0)) if consume is not None
+                  else mesh.arrays())
+        del mesh
     seen = sums["network_queries"] - sums["sparse_balls"]
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
                    "workers": settings.workers or available_cores(),
@@ -698,4 +741,4 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     mesh_stats = {**stitched, "tiles_turned": int(len(turn)),
                   "iso": float(np.median(isos)) if isos else 0.0}
     progress(1.0, "tiles stitched")
-    return vertices, faces.astype(np.int64, copy=False), field_stats, mesh_stats
+    return output, field_stats, mesh_stats

@@ -248,7 +248,8 @@ def main() -> int:
         parser.error(f"cannot create the output folder: {error}")
     print(f"settings: {settings.to_dict()}", flush=True)
 
-    reconstruct = importlib.import_module(package + ".engine.reconstruct").reconstruct
+    reconstruct_to_file = importlib.import_module(
+        package + ".engine.reconstruct_to_file").reconstruct_to_file
     stop = stop_on_interrupt()
     failed = []
     try:
@@ -258,7 +259,7 @@ def main() -> int:
                 raise KeyboardInterrupt
             try:
                 result = reconstruct_one(path, mesh_path, settings, prefix, engine_io,
-                                         reconstruct, preflight, stop.is_set)
+                                         reconstruct_to_file, stop.is_set)
             except (errors.InputError, OSError) as error:
                 reason = str(error)
             except errors.Cancelled:
@@ -266,9 +267,10 @@ def main() -> int:
             except Exception as error:  # one input's bug must not stop the others
                 reason = f"unexpected {type(error).__name__}: {error}"
             else:
-                if args.blend or args.preview:
-                    add_to_scene(result.mesh, mesh_path.stem, args, len(files), prefix,
-                                 package)
+                if args.blend or args.preview:  # a mesh written tile by tile is read back
+                    mesh = (result.mesh if result.mesh is not None
+                            else engine_io.read_mesh(mesh_path))
+                    add_to_scene(mesh, mesh_path.stem, args, len(files), prefix, package)
                 continue
             print(f"{prefix} error: {reason}", file=sys.stderr, flush=True)
             failed.append((path, reason))
@@ -303,22 +305,19 @@ def stop_on_interrupt() -> threading.Event:
     return stop
 
 
-def reconstruct_one(path, mesh_path, settings, prefix, engine_io, reconstruct, preflight,
+def reconstruct_one(path, mesh_path, settings, prefix, engine_io, reconstruct_to_file,
                     cancel):
-    """Read one input, reconstruct it, write its mesh (atomically); return the result.
-    ``cancel()`` true stops it (Cancelled, or KeyboardInterrupt once reconstructed) before
-    anything is written."""
+    """Read one input, reconstruct it into its mesh file (atomically; a tiled mesh written
+    tile by tile); return the result. ``cancel()`` true stops it (Cancelled) before the mesh
+    file is complete, leaving nothing written."""
     cloud = engine_io.read_point_cloud(path)
     print(f"{prefix} {len(cloud):,} points", flush=True)
     started = time.perf_counter()
-    result = reconstruct(cloud, settings, progress=ProgressPrinter(prefix), cancel=cancel)
+    result = reconstruct_to_file(cloud, mesh_path, settings, progress=ProgressPrinter(prefix),
+                                 cancel=cancel)
     for message in result.messages:
         print(f"{prefix} note: {message}", flush=True)
-    preflight.check_result(result.mesh)
-    if cancel():
-        raise KeyboardInterrupt
-    engine_io.write_mesh(mesh_path, result.mesh)
-    print(f"{prefix} wrote {mesh_path} ({len(result.mesh.faces):,} faces, "
+    print(f"{prefix} wrote {mesh_path} ({result.stats['faces']:,} faces, "
           f"{time.perf_counter() - started:.1f} s)", flush=True)
     return result
 

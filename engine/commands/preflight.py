@@ -97,16 +97,22 @@ a cloud too sparse for the grid gives a scatter of specks of one to a few faces 
 def check_result(mesh, what: str = "the reconstruction") -> None:
     """Refuse an empty or near-empty result (no faces, or only specks: every piece smaller
     than :data:`MIN_PIECE_FACES` faces); such a mesh is an error, not a file to write."""
-    faces = len(mesh.faces)
+    sizes = _piece_sizes(mesh.faces, len(mesh.vertices)) if len(mesh.faces) else [0]
+    check_pieces(len(mesh.vertices), len(mesh.faces), len(sizes), int(max(sizes)), what)
+
+
+def check_pieces(vertex_count: int, face_count: int, pieces: int, largest: int,
+                 what: str = "the reconstruction") -> None:
+    """:func:`check_result` from a mesh's counts: its vertices, faces, pieces and the faces of
+    its largest piece."""
     advice = ("so nothing was written; the cloud may be too sparse or too small for the grid: "
               "try a larger --radius or a lower --resolution, or add points")
-    if faces == 0:
-        raise InputError(f"{what} found no surface ({len(mesh.vertices):,} vertices, 0 faces), "
+    if face_count == 0:
+        raise InputError(f"{what} found no surface ({vertex_count:,} vertices, 0 faces), "
                          f"{advice}")
-    sizes = _piece_sizes(mesh.faces, len(mesh.vertices))
-    if sizes.max() < MIN_PIECE_FACES:
-        raise InputError(f"{what} found no surface, only {len(sizes):,} specks of "
-                         f"{sizes.max()} faces or fewer ({faces:,} faces in all), {advice}")
+    if largest < MIN_PIECE_FACES:
+        raise InputError(f"{what} found no surface, only {pieces:,} specks of "
+                         f"{largest} faces or fewer ({face_count:,} faces in all), {advice}")
 
 
 def _piece_sizes(faces, vertex_count: int):

@@ -5,7 +5,8 @@ line says where the mesh went, its size and the time. The mesh is in the input's
 Ctrl-C cancels at the next check (a second Ctrl-C stops at once). Nothing is written when the
 input is refused, the result is empty or the run is cancelled; the output is checked (writable
 folder, known extension, not the input) and the device too before any work, and the write is
-atomic (a failed write leaves an existing file as it was).
+atomic (a failed write leaves an existing file as it was). A cloud made in tiles goes to a PLY
+output tile by tile (:mod:`..reconstruct_to_file`).
 """
 
 import os
@@ -67,9 +68,9 @@ class _StderrProgress:
 
 def run(args) -> int:
     """Read the input, reconstruct, write the output; return the exit status."""
-    from ..io import read_point_cloud, write_mesh
-    from ..reconstruct import reconstruct
-    from .preflight import check_device, check_outputs, check_result
+    from ..io import read_point_cloud
+    from ..reconstruct_to_file import reconstruct_to_file
+    from .preflight import check_device, check_outputs
 
     started = time.perf_counter()
     settings = ReconstructSettings.from_attributes(args)
@@ -79,8 +80,8 @@ def run(args) -> int:
     stop = threading.Event()
 
     def interrupt(signum, frame):
-        # the first Ctrl-C (or SIGTERM) cancels cleanly at the next check; a second one ends
-        # at once
+        # the first Ctrl-C (or SIGTERM) cancels cleanly at the next check, during the write
+        # too; a second one ends at once
         stop.set()
         signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT
                       else signal.SIG_DFL)
@@ -90,8 +91,10 @@ def run(args) -> int:
     try:
         cloud = read_point_cloud(args.input)
         try:
-            result = reconstruct(cloud, settings, progress, stop.is_set)
-        except InputError as error:  # the cloud is refused (NaN, too few points, a line...)
+            result = reconstruct_to_file(cloud, args.output, settings, progress, stop.is_set)
+        except KeyboardInterrupt:  # the second signal, during the write
+            raise Cancelled() from None
+        except InputError as error:  # refused: the cloud (NaN, a line...) or an empty result
             progress.end_line()
             raise InputError(f"{os.path.basename(args.input)}: {error}") from None
     finally:
@@ -101,26 +104,7 @@ def run(args) -> int:
     if not args.quiet:
         for message in result.messages:
             print(f"note: {message}", file=sys.stderr)
-    check_result(result.mesh)
-    _write_interruptibly(args.output, result.mesh, write_mesh)
-    if not args.quiet:
-        print(f"wrote {args.output}: {len(result.mesh.vertices):,} vertices, "
-              f"{len(result.mesh.faces):,} faces from {len(cloud):,} points "
+        print(f"wrote {args.output}: {result.stats['vertices']:,} vertices, "
+              f"{result.stats['faces']:,} faces from {len(cloud):,} points "
               f"in {time.perf_counter() - started:.1f} s", file=sys.stderr)
     return 0
-
-
-def _write_interruptibly(path, mesh, write_mesh) -> None:
-    """Write the mesh; Ctrl-C or SIGTERM during the write stops it, removes the partial
-    temporary file and leaves any existing output as it was (raises Cancelled)."""
-
-    def stop_writing(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, stop_writing)
-    try:
-        write_mesh(path, mesh)
-    except KeyboardInterrupt:
-        raise Cancelled() from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)

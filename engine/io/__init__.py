@@ -42,7 +42,7 @@ from .off import read_off, write_off
 from .ply import read_ply, write_ply
 
 __all__ = ["READ_FORMATS", "WRITE_FORMATS", "read_point_cloud", "read_mesh", "write_mesh",
-           "check_output_path", "same_file", "read_npz_arrays"]
+           "write_ply_in_blocks", "check_output_path", "same_file", "read_npz_arrays"]
 
 _READERS = {"ply": read_ply, "obj": read_obj, "off": read_off, "stl": read_stl,
             "glb": read_gltf, "gltf": read_gltf, "xyz": read_columns, "pts": read_columns,
@@ -110,7 +110,7 @@ def read_mesh(path) -> Mesh:
         raise InputError(f"{name}: not a valid {extension.upper()} file ({error})") from None
 
 
-def write_mesh(path, mesh: Mesh) -> None:
+def write_mesh(path, mesh: Mesh, cancel=None) -> None:
     """Write a mesh as PLY, OBJ, OFF, STL, GLB or glTF, chosen by the extension.
 
     PLY (binary little endian) keeps float64 vertices, float32 normals and uchar colours. OBJ
@@ -130,11 +130,15 @@ def write_mesh(path, mesh: Mesh) -> None:
     mesh : Mesh
         vertices (V, 3), faces (F, 3) (may be empty, except for STL), optional normals (V, 3)
         and colours (V, 3|4) in [0, 1].
+    cancel : callable ``() -> bool``, optional
+        Polled before each chunk the writer writes; True stops the write (``Cancelled``).
 
     Raises
     ------
     InputError
         Unsupported extension, or the file cannot be written.
+    Cancelled
+        ``cancel()`` returned True; the target is left as it was.
     """
     path = os.fspath(path)
     name = os.path.basename(path) or path
@@ -154,9 +158,57 @@ def write_mesh(path, mesh: Mesh) -> None:
         raise InputError(f"{name}: {extension.upper()} stores triangles only and this mesh has "
                          f"none; use PLY, OBJ or OFF for points")
     try:
-        write_atomically(path, lambda file: writer(file, vertices, faces, normals, colors))
+        write_atomically(path, lambda file: writer(_Cancellable(file, cancel), vertices, faces,
+                                                   normals, colors))
     except OSError as error:
         raise InputError(f"{name}: cannot be written ({error.strerror or error})") from None
+
+
+def write_ply_in_blocks(path, vertex_count: int, face_count: int, channels: int,
+                        vertex_blocks, face_blocks, cancel=None) -> None:
+    """Write a mesh as binary PLY, atomically (as :func:`write_mesh`), from its parts in order:
+    ``vertex_blocks`` yields ``(vertices (k, 3), colours (k, channels) in [0, 1] or None)``,
+    ``face_blocks`` triangles (k, 3); the counts are the totals. The same bytes as
+    :func:`write_mesh` of the whole mesh, without holding it. ``cancel`` is polled between
+    blocks. The generators may raise (an :class:`InputError` after the last block, say): the
+    target is then left as it was."""
+    from ..progress import check_cancel
+    from .ply import ply_face_records, ply_header, ply_vertex_records
+
+    path = os.fspath(path)
+
+    def write(file) -> None:
+        file.write(ply_header(vertex_count, face_count, False, channels))
+        for vertices, colors in vertex_blocks:
+            check_cancel(cancel)
+            if colors is not None:
+                colors = np.clip(np.asarray(colors, dtype=np.float64), 0.0, 1.0)
+            file.write(ply_vertex_records(vertices, None, colors))
+        for faces in face_blocks:
+            check_cancel(cancel)
+            file.write(ply_face_records(faces))
+
+    try:
+        write_atomically(path, write)
+    except OSError as error:
+        name = os.path.basename(path) or path
+        raise InputError(f"{name}: cannot be written ({error.strerror or error})") from None
+
+
+class _Cancellable:
+    """A file whose writes first poll ``cancel`` (a writer's chunks: a table, a few rows)."""
+
+    def __init__(self, file, cancel):
+        self._file, self._cancel = file, cancel
+
+    def write(self, data):
+        from ..progress import check_cancel
+
+        check_cancel(self._cancel)
+        return self._file.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
 
 
 def check_output_path(path, inputs=()) -> str:

@@ -279,26 +279,49 @@ def read_ply(path: str) -> Mesh:
 
 
 def write_ply(file, vertices, faces, normals, colors) -> None:
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    file.write(ply_header(len(vertices), len(faces), normals is not None,
+                          0 if colors is None else colors.shape[1]))
+    file.write(ply_vertex_records(vertices, normals, colors))
+    file.write(ply_face_records(faces))
+
+
+def ply_header(vertex_count: int, face_count: int, normals: bool, channels: int) -> bytes:
+    """The header :func:`write_ply` writes: float64 positions, float32 normals when
+    ``normals``, ``channels`` (0, 3 or 4) uchar colour channels, int vertex indices. With
+    :func:`ply_vertex_records` and :func:`ply_face_records` a mesh can be written in blocks."""
     header = ["ply", "format binary_little_endian 1.0", "comment UDF Reconstruction",
-              f"element vertex {len(vertices)}",
+              f"element vertex {vertex_count}",
               "property double x", "property double y", "property double z"]
+    if normals:
+        header += ["property float nx", "property float ny", "property float nz"]
+    header += [f"property uchar {c}" for c in _CHANNELS[:channels]]
+    header += [f"element face {face_count}", "property list uchar int vertex_indices",
+               "end_header"]
+    return ("\n".join(header) + "\n").encode("ascii")
+
+
+def ply_vertex_records(vertices, normals, colors) -> bytes:
+    """Vertices (k, 3) float64 with their normals and colours (in [0, 1]) or None, as the
+    records of :func:`ply_header`'s vertex element."""
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
-        header += ["property float nx", "property float ny", "property float nz"]
-    channels = ("red", "green", "blue", "alpha")[:0 if colors is None else colors.shape[1]]
+    channels = _CHANNELS[:0 if colors is None else colors.shape[1]]
     fields += [(c, "u1") for c in channels]
-    header += [f"property uchar {c}" for c in channels]
-    header += [f"element face {len(faces)}", "property list uchar int vertex_indices",
-               "end_header"]
     table = np.empty(len(vertices), dtype=fields)
     table["x"], table["y"], table["z"] = vertices.T
     if normals is not None:
         table["nx"], table["ny"], table["nz"] = normals.T
     for i, channel in enumerate(channels):
         table[channel] = np.round(colors[:, i] * 255.0)
-    face_table = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
-    face_table["n"], face_table["v"] = 3, faces
-    file.write(("\n".join(header) + "\n").encode("ascii"))
-    file.write(table.tobytes())
-    file.write(face_table.tobytes())
+    return table.tobytes()
+
+
+def ply_face_records(faces) -> bytes:
+    """Triangles (k, 3) as the records of :func:`ply_header`'s face element."""
+    table = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
+    table["n"], table["v"] = 3, faces
+    return table.tobytes()
+
+
+_CHANNELS = ("red", "green", "blue", "alpha")

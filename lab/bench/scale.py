@@ -16,7 +16,9 @@ point; cropped and sampled room by room, :func:`truth_samples`, so that memory s
 large floors), by exact point-to-triangle distances both ways (:func:`score`); and the scan's
 own floor: a second scan of the same floor, of the same size, scored the same way as points
 (what a perfect reconstruction of this sampling would score). Each method runs in a
-fresh child process so its peak memory is its own.
+fresh child process so its peak memory is its own; ours writes its mesh to a PLY file as the
+CLI does (:func:`engine.reconstruct_to_file.reconstruct_to_file`: tile by tile), and the
+scoring reads it back.
 """
 
 import argparse
@@ -109,14 +111,15 @@ def write_cloud(rooms: int, points: int, seed: int, path: str) -> None:
 
 
 def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int) -> dict:
-    from engine.reconstruct import reconstruct
+    """Ours as the CLI runs it: into a PLY file, tile by tile when tiled."""
+    from engine.reconstruct_to_file import reconstruct_to_file
 
     cloud = np.load(folder / "cloud.npy")
     started = time.perf_counter()
-    result = reconstruct(cloud, dict(detail="voxel_size", voxel_size=voxel,
-                                     tile_cells=tile_cells, workers=workers))
+    result = reconstruct_to_file(cloud, folder / "ours.ply",
+                                 dict(detail="voxel_size", voxel_size=voxel,
+                                      tile_cells=tile_cells, workers=workers))
     seconds = time.perf_counter() - started
-    np.savez(folder / "ours.npz", vertices=result.mesh.vertices, faces=result.mesh.faces)
     return {"seconds": seconds, "tiles": result.stats.get("tiles", 1),
             "workers": result.stats.get("workers", 1), "faces": result.stats["faces"],
             "cells": result.stats["cells"],
@@ -323,8 +326,17 @@ def run(args) -> int:
                   file=sys.stderr)
             return 1
         figures = json.loads(done.stdout.strip().splitlines()[-1])
-        mesh = np.load(folder / f"{method}.npz")
-        figures.update(score(mesh["vertices"], mesh["faces"], folder, truth))
+        if method == "ours":
+            from engine.io import read_mesh
+
+            mesh = read_mesh(folder / "ours.ply")
+            vertices, faces = mesh.vertices, mesh.faces
+        else:
+            mesh = np.load(folder / "poisson.npz")
+            vertices, faces = mesh["vertices"], mesh["faces"]
+        del mesh
+        figures.update(score(vertices, faces, folder, truth))
+        del vertices, faces
         name = (f"ours (voxel {args.voxel_size * 100:g} cm)" if method == "ours"
                 else f"poisson (depth {args.poisson_depth})")
         rows[name] = figures

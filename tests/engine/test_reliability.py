@@ -331,7 +331,7 @@ def test_an_empty_result_is_an_error_and_writes_nothing(tmp_path):
     done = engine_cli("reconstruct", tmp_path / "ten.xyz", previous, "--resolution", "32",
                       "--outliers", "keep")
     assert done.returncode == 2, done.stderr
-    assert "error: the reconstruction found no surface" in done.stderr, done.stderr
+    assert "error: ten.xyz: the reconstruction found no surface" in done.stderr, done.stderr
     assert "nothing was written" in done.stderr and "wrote" not in done.stderr
     assert digest(previous) == before, "the previous mesh is not replaced by an empty one"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply", "ten.xyz"]

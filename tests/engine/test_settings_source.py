@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import engine.reconstruct
+import engine.reconstruct_to_file
 from engine.__main__ import main
 from engine.commands import reconstruct as reconstruct_command
 from engine.commands.settings_args import add_settings_arguments
@@ -87,11 +88,11 @@ def test_the_cli_hands_its_flags_to_reconstruct_as_settings(tmp_path, monkeypatc
     np.savetxt(cloud, np.random.default_rng(0).random((200, 3)))
     received = []
 
-    def recording(points, settings, progress=None, cancel=None):
+    def recording(points, path, settings, progress=None, cancel=None):
         received.append(settings)
         raise Cancelled()
 
-    monkeypatch.setattr(engine.reconstruct, "reconstruct", recording)
+    monkeypatch.setattr(engine.reconstruct_to_file, "reconstruct_to_file", recording)
     status = main(["reconstruct", str(cloud), str(tmp_path / "mesh.ply"), "--udf-source",
                    "nearest", "--resolution", "48", "--outlier-ratio", "3", "--quiet"])
     assert status == 130 and len(received) == 1

@@ -1,0 +1,105 @@
+"""Reconstructing straight into a file: a tiled mesh goes to PLY tile by tile, byte for byte
+what the in-memory mesh writes, and a refused or cancelled write leaves the target alone."""
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from engine.errors import Cancelled, InputError
+from engine.geometry import Mesh, PointCloud
+from engine.io import read_mesh, write_mesh, write_ply_in_blocks
+from engine.meshing.mesh_ops import PieceSizes, vertex_components
+from engine.reconstruct import reconstruct
+from engine.reconstruct_to_file import reconstruct_to_file
+
+from .test_tiles import hemisphere_cloud
+
+SETTINGS = dict(detail="resolution", resolution=48, tile_cells=24, seed=0, workers=1)
+
+
+def digest(path) -> str:
+    return hashlib.md5(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def coloured():
+    points = hemisphere_cloud(8_000, seed=3)
+    colors = np.random.default_rng(3).random((len(points), 3)).astype(np.float32)
+    cloud = PointCloud(points, colors=colors)
+    return cloud, reconstruct(cloud, SETTINGS)
+
+
+def test_a_tiled_ply_is_streamed_with_the_same_bytes_as_the_mesh_in_memory(coloured, tmp_path):
+    cloud, in_memory = coloured
+    assert in_memory.stats["tiles"] > 1
+    write_mesh(tmp_path / "whole.ply", in_memory.mesh)
+    streamed = reconstruct_to_file(cloud, tmp_path / "streamed.ply", SETTINGS)
+    assert streamed.mesh is None, "the tiled mesh went to the file, not to memory"
+    assert digest(tmp_path / "streamed.ply") == digest(tmp_path / "whole.ply")
+    for key in ("vertices", "faces", "components"):
+        assert streamed.stats[key] == in_memory.stats[key], key
+    mesh = read_mesh(tmp_path / "streamed.ply")
+    assert mesh.colors is not None and len(mesh.faces) == in_memory.stats["faces"]
+
+
+def test_other_formats_and_one_grid_are_written_from_memory(coloured, tmp_path):
+    cloud, in_memory = coloured
+    result = reconstruct_to_file(cloud, tmp_path / "mesh.obj", SETTINGS)
+    assert result.mesh is not None
+    assert len(read_mesh(tmp_path / "mesh.obj").faces) == in_memory.stats["faces"]
+    untiled = reconstruct_to_file(cloud.points, tmp_path / "one.ply",
+                                  dict(SETTINGS, tile_cells=0))
+    assert untiled.mesh is not None and "tiles" not in untiled.stats
+    assert len(read_mesh(tmp_path / "one.ply").faces) == untiled.stats["faces"]
+
+
+def test_a_cancel_while_the_tiles_are_written_leaves_the_previous_file(coloured, tmp_path):
+    cloud, _ = coloured
+    target = tmp_path / "mesh.ply"
+    write_mesh(target, Mesh(np.eye(3), np.array([[0, 1, 2]])))
+    before = digest(target)
+    writing = []
+
+    def progress(fraction, message):
+        if message.startswith("writing"):
+            writing.append(fraction)
+
+    with pytest.raises(Cancelled):
+        reconstruct_to_file(cloud, target, SETTINGS, progress, cancel=lambda: bool(writing))
+    assert writing, "the write was under way"
+    assert digest(target) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply"]
+
+
+def test_a_block_writer_that_refuses_at_the_end_writes_nothing(tmp_path):
+    target = tmp_path / "mesh.ply"
+    write_mesh(target, Mesh(np.eye(3), np.array([[0, 1, 2]])))
+    before = digest(target)
+
+    def faces():
+        yield np.array([[0, 1, 2]])
+        raise InputError("only specks")
+
+    with pytest.raises(InputError, match="only specks"):
+        write_ply_in_blocks(target, 3, 1, 0, [(np.eye(3), None)], faces())
+    assert digest(target) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply"]
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
+def test_pieces_counted_block_by_block_match_the_whole_mesh(kernels, monkeypatch):
+    if kernels == "numpy":
+        monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    rng = np.random.default_rng(5)
+    n = 6_000
+    faces = rng.integers(0, n, size=(1_200, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+                  & (faces[:, 0] != faces[:, 2])]
+    sizes = PieceSizes(n)
+    assert (sizes.compiled is None) == (kernels == "numpy")
+    for block in np.array_split(faces, 7):
+        sizes.add(block)
+    count, labels = vertex_components(n, faces)
+    assert count > 100, "many pieces, of several sizes"
+    assert sizes.result() == (count, int(np.bincount(labels).max()))
