@@ -33,6 +33,9 @@ LARGEST_COORDINATE = 1e100
 _UNIQUE_SAMPLE = 4096
 """Distinct points are first counted in this many leading points; usually that settles it."""
 
+_LINE_CHUNK = 1 << 20
+"""Points per chunk of the line test (:func:`_on_a_line`)."""
+
 
 @dataclass(frozen=True, eq=False)
 class UnitFrame:
@@ -186,10 +189,22 @@ def _on_a_line(points: np.ndarray, center: np.ndarray, extent: float, largest: f
     Far from the origin the coordinates' rounding (``largest`` absolute coordinate) widens the
     tolerance (:data:`_ROUNDING_ULPS`).
     """
-    centred = (points - center) / extent
-    centred -= centred.mean(axis=0)
-    _, vectors = np.linalg.eigh(centred.T @ centred)
+    starts = range(0, len(points), _LINE_CHUNK)  # a few copies of a chunk, not of the cloud
+
+    def centred(start: int) -> np.ndarray:
+        return (points[start:start + _LINE_CHUNK] - center) / extent
+
+    mean = sum(centred(start).sum(axis=0) for start in starts) / len(points)
+    scatter = np.zeros((3, 3))
+    for start in starts:
+        chunk = centred(start) - mean
+        scatter += chunk.T @ chunk
+    _, vectors = np.linalg.eigh(scatter)
     axis = vectors[:, -1]
-    off_line = centred - np.outer(centred @ axis, axis)
+    farthest = 0.0
+    for start in starts:
+        chunk = centred(start) - mean
+        off_line = chunk - np.outer(chunk @ axis, axis)
+        farthest = max(farthest, float(np.max(np.einsum("ij,ij->i", off_line, off_line))))
     tolerance = max(_LINE_TOLERANCE, _ROUNDING_ULPS * np.finfo(np.float64).eps * largest / extent)
-    return float(np.sqrt(np.max(np.einsum("ij,ij->i", off_line, off_line)))) <= tolerance
+    return float(np.sqrt(farthest)) <= tolerance

@@ -125,7 +125,7 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_OUTLIER_RATIO,
         if len(kept) <= NEIGHBOURS + 1:
             break
         span = (1.0 - _SORT_SHARE - _SURFACE_SHARE) / ROUNDS
-        isolated = _isolated(distinct[kept], ratio,
+        isolated = _isolated(distinct[kept] if round_ else distinct, ratio,
                              sub_progress(progress, _SORT_SHARE + round_ * span,
                                           _SORT_SHARE + (round_ + 1) * span), cancel,
                              f"pass {round_ + 1} of at most {ROUNDS}")
@@ -162,7 +162,7 @@ def _distinct_rows(points: np.ndarray):
     np.any(ordered[1:] != ordered[:-1], axis=1, out=new[1:])
     copy_of = np.empty(len(points), dtype=np.int64)
     copy_of[order] = np.cumsum(new) - 1
-    return ordered[new], copy_of
+    return (ordered if new.all() else ordered[new]), copy_of
 
 
 def _isolated(points: np.ndarray, ratio: float, progress: ProgressFn = no_progress,
