@@ -210,6 +210,10 @@ class _Seam:
     b: np.ndarray
 
 
+SEAM_BLOCK = 1 << 20
+"""Most seam faces :meth:`StitchedMesh.face_blocks` yields at once."""
+
+
 def _split_all(pieces, tiles, spacing: float) -> list:
     """The pieces as :class:`TilePiece` (those given as ``(vertices, faces)`` split, held)."""
     return [piece if isinstance(piece, TilePiece) else split_tile(*piece, tile, spacing)
@@ -440,7 +444,8 @@ class StitchedMesh:
             turn = np.flatnonzero(self.flip[label])
             block[turn] = block[turn][:, ::-1]
             yield block
-        yield remap[self.seam_faces].astype(np.int64)
+        for start in range(0, len(self.seam_faces), SEAM_BLOCK):  # the seam's may be many
+            yield remap[self.seam_faces[start:start + SEAM_BLOCK]].astype(np.int64)
 
     def arrays(self):
         """``(vertices (n, 3) float64, faces (m, 3) int64)``: the whole mesh in memory."""

@@ -261,8 +261,8 @@ def scan_floor_score(folder: Path, truth) -> dict:
     return _distances_to_scores(accuracy, completeness)
 
 
-COLUMNS = ("seconds", "peak_gib", "worker_peak_gib", "tiles", "cd_cm", "f1_0.5cm", "f1_1cm",
-           "f1_2cm", "nc")
+COLUMNS = ("seconds", "peak_gib", "worker_peak_gib", "tiles", "faces", "cd_cm", "f1_0.5cm",
+           "f1_1cm", "f1_2cm", "nc")
 
 
 def add_arguments(parser) -> None:
@@ -350,11 +350,14 @@ def run(args) -> int:
 
 
 def report(paths) -> str:
-    """One markdown table of the runs in ``paths`` (JSON files written by :func:`run`)."""
+    """One markdown table of the runs in ``paths`` (JSON files written by :func:`run`), the
+    smallest floor first."""
     lines = ["| floor | | " + " | ".join(COLUMNS) + " |",
              "|---" * (len(COLUMNS) + 2) + "|"]
-    for path in paths:
-        run_data = json.loads(Path(path).read_text())
+    runs = [json.loads(Path(path).read_text()) for path in paths]
+    runs.sort(key=lambda run_data: (run_data["settings"]["rooms"],
+                                    run_data["settings"]["points"]))
+    for run_data in runs:
         settings = run_data["settings"]
         floor = f"{settings['rooms']} rooms, {settings['points']:,} points"
         for name, row in run_data["rows"].items():

@@ -6,6 +6,7 @@ import hashlib
 import numpy as np
 import pytest
 
+import engine.tiles
 from engine.errors import Cancelled, InputError
 from engine.geometry import Mesh, PointCloud
 from engine.io import read_mesh, write_mesh, write_ply_in_blocks
@@ -103,3 +104,39 @@ def test_pieces_counted_block_by_block_match_the_whole_mesh(kernels, monkeypatch
     count, labels = vertex_components(n, faces)
     assert count > 100, "many pieces, of several sizes"
     assert sizes.result() == (count, int(np.bincount(labels).max()))
+
+
+def test_the_tile_by_tile_write_never_holds_the_whole_mesh(tmp_path, monkeypatch):
+    """numpy's allocations (tracemalloc) while the tiles are written: under half the mesh's
+    arrays, which gathering the same stitched mesh into memory allocates."""
+    import tracemalloc
+
+    import engine.reconstruct_to_file as to_file
+
+    points = hemisphere_cloud(30_000, seed=4)
+    cloud = PointCloud(points, colors=np.random.default_rng(4).random((len(points), 3)))
+    settings = dict(SETTINGS, resolution=128, tile_cells=48, udf_source="nearest")
+    PieceSizes(3).add(np.array([[0, 1, 2]]))  # the compiled kernels loaded before measuring
+    real = to_file._write_stitched
+    peaks = {}
+
+    def peak(call):
+        tracemalloc.start()
+        try:
+            return call()
+        finally:
+            peaks.setdefault(len(peaks), tracemalloc.get_traced_memory()[1])
+            tracemalloc.stop()
+
+    def measured(path, stitched, *rest):
+        written = peak(lambda: real(path, stitched, *rest))
+        gathered = peak(stitched.arrays)
+        peaks["whole"] = sum(array.nbytes for array in gathered)
+        return written
+
+    monkeypatch.setattr(to_file, "_write_stitched", measured)
+    monkeypatch.setattr(engine.tiles, "SEAM_BLOCK", 4096)  # as a large scan's share of it
+    result = reconstruct_to_file(cloud, tmp_path / "mesh.ply", settings)
+    assert result.stats["tiles"] >= 8
+    assert peaks[1] > peaks["whole"], "gathering holds the whole mesh"
+    assert peaks[0] < 0.5 * peaks["whole"], peaks
