@@ -371,4 +371,4 @@ def _cell(value) -> str:
         return "–"
     if isinstance(value, float):
         return f"{value:.1f}" if value >= 10 else f"{value:.3f}"
-    return str(value)
+    return f"{value:,}" if isinstance(value, int) else str(value)
