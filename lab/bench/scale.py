@@ -140,17 +140,52 @@ def run_poisson(folder: Path, depth: int) -> dict:
 
 
 def child(args) -> None:
-    """One method in this (child) process; prints its figures as JSON."""
+    """One method in this (child) process; prints its figures as JSON, with ``rss_trace``:
+    this process's resident memory (GiB) every :data:`TRACE_SECONDS` seconds, as
+    ``[seconds, GiB]`` pairs (empty where /proc cannot be read)."""
+    import threading
+
     from engine.tile_runners import process_peak_bytes
 
     folder = Path(args.work)
+    trace, done = [], threading.Event()
+    started = time.perf_counter()
+
+    def sample() -> None:
+        while True:
+            resident = _resident_bytes()
+            if resident:
+                trace.append([round(time.perf_counter() - started, 1),
+                              round(resident / 2 ** 30, 3)])
+            if done.wait(TRACE_SECONDS):
+                return
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
     if args.child == "ours":
         figures = run_ours(folder, args.voxel_size, args.tile_cells, args.workers)
     else:
         figures = run_poisson(folder, args.poisson_depth)
+    done.set()
+    sampler.join()
     # this process's own peak (VmHWM starts afresh at exec); the workers report theirs
     print(json.dumps({"worker_peak_gib": None, **figures,
-                      "peak_gib": process_peak_bytes() / 2 ** 30}))
+                      "peak_gib": process_peak_bytes() / 2 ** 30, "rss_trace": trace}))
+
+
+TRACE_SECONDS = 5.0
+
+
+def _resident_bytes() -> int:
+    """This process's resident memory now (``VmRSS``), 0 where it cannot be read."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
 
 
 def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
@@ -340,7 +375,8 @@ def run(args) -> int:
         name = (f"ours (voxel {args.voxel_size * 100:g} cm)" if method == "ours"
                 else f"poisson (depth {args.poisson_depth})")
         rows[name] = figures
-        print(name, json.dumps(figures), file=sys.stderr, flush=True)
+        shown = {key: value for key, value in figures.items() if key != "rss_trace"}
+        print(name, json.dumps(shown), file=sys.stderr, flush=True)
     out.mkdir(parents=True, exist_ok=True)
     name = f"floor_{args.rooms}r_{args.points}p_{args.voxel_size * 100:g}cm.json"
     settings = {key: value for key, value in vars(args).items() if key not in ("child", "report")}
