@@ -81,6 +81,23 @@ def _whole(number: int, result):
     return result
 
 
+def process_resident_bytes() -> int:
+    """This process's resident memory now (``VmRSS``), in bytes; 0 where /proc is missing."""
+    return _status_bytes("VmRSS")
+
+
+def _status_bytes(key: str) -> int:
+    """A ``kB`` line of /proc/self/status in bytes, 0 where it cannot be read."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
 def process_peak_bytes() -> int:
     """This process's peak resident memory so far, in bytes (0 where it cannot be read).
 
@@ -88,13 +105,9 @@ def process_peak_bytes() -> int:
     ``getrusage(RUSAGE_CHILDREN)`` in the parent: a child started by fork and exec carries in
     it the parent's size at the fork.
     """
-    try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
+    peak = _status_bytes("VmHWM")
+    if peak:
+        return peak
     try:
         import resource
     except ImportError:  # Windows

@@ -145,7 +145,7 @@ def child(args) -> None:
     ``[seconds, GiB]`` pairs (empty where /proc cannot be read)."""
     import threading
 
-    from engine.tile_runners import process_peak_bytes
+    from engine.tile_runners import process_peak_bytes, process_resident_bytes
 
     folder = Path(args.work)
     trace, done = [], threading.Event()
@@ -153,7 +153,7 @@ def child(args) -> None:
 
     def sample() -> None:
         while True:
-            resident = _resident_bytes()
+            resident = process_resident_bytes()
             if resident:
                 trace.append([round(time.perf_counter() - started, 1),
                               round(resident / 2 ** 30, 3)])
@@ -174,18 +174,6 @@ def child(args) -> None:
 
 
 TRACE_SECONDS = 5.0
-
-
-def _resident_bytes() -> int:
-    """This process's resident memory now (``VmRSS``), 0 where it cannot be read."""
-    try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 0
 
 
 def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
