@@ -677,7 +677,10 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     progress = progress or no_progress
     spacing = 1.0 / settings.resolution
     tiles = plan_tiles(points, spacing, tile_cells)
-    anchor = points.min(axis=0)
+    # the nodes lie half a cell off the lowest point: anchored on it, the scan's lowest surface
+    # (a floor), and any parallel one a whole number of cells away, lies on a node plane, where
+    # the cover's iso-value of one cell meets the next nodes and marching cubes cuts slivers
+    anchor = points.min(axis=0) - 0.5 * spacing
     reach = tile_reach(settings, spacing)
 
     def job(number: int) -> tuple:
