@@ -58,7 +58,7 @@ NORMAL_RINGS = 3
 WELD_CELLS = 0.9
 """Other boundary vertices of neighbouring tiles that are each other's nearest within this
 many cells are welded too."""
-SEAM_CELLS = 8.0
+SEAM_CELLS = 4.0
 """Faces with a vertex this close (cells) to their tile's core border are the seam's: the only
 ones stitching may change (welds, the rings whose normals vote, ears, holes, bow-ties)."""
 
@@ -293,18 +293,23 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
     stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0,
              "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
              "cleanup_small_pieces": 0}
-    faces, zone, piece = seam.faces, seam.zone, seam.face_piece
-    local = seam.points
+    faces, zone, piece, local, a, b = (seam.faces, seam.zone, seam.face_piece, seam.points,
+                                       seam.a, seam.b)
+    # from here on the seam's arrays change hands: the seam keeps what the output reads
+    seam.faces = seam.zone = seam.face_piece = seam.points = seam.a = seam.b = None
     flip = np.zeros(len(seam.piece_tile), bool)
     if not len(faces):  # no surface near a border: nothing to stitch
         return StitchedMesh(seam, local, faces, flip, flip), stats
-    if len(seam.a):
-        flip = _piece_flips(local, faces, piece, len(flip), seam.a, seam.b)
+    if len(a):
+        flip = _piece_flips(local, faces, piece, len(flip), a, b)
         stats["flipped"] = int(flip.sum())
-        local, merged = _weld(local, seam.a, seam.b)
+        local, merged = _weld(local, a, b)
+        del a, b
         stats["welded"] = int(len(local) - len(np.unique(merged)))
         faces = merged[faces]
-    faces = np.where(flip[piece][:, None], faces[:, ::-1], faces)
+    turn = flip[piece]
+    faces[turn] = faces[turn][:, ::-1]
+    del turn
     keep = ((faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
             & (faces[:, 0] != faces[:, 2]))
     faces, zone, piece = faces[keep], zone[keep], piece[keep]
@@ -349,7 +354,9 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
 def _ears_kept(faces: np.ndarray, may_drop: np.ndarray, passes: int = 3):
     """The faces left when those hanging on a weld are dropped (``may_drop`` only): a face
     with a third face on one of its edges and nothing on the other two (one tile's face over
-    the other tile's, sharing an edge). Returns the kept mask and how many were dropped."""
+    the other tile's, sharing an edge); where there is none, a flap: a face with a third face
+    on one edge and nothing on one other, one per such edge. Returns the kept mask and how
+    many were dropped."""
     from .meshing.mesh_ops import edge_topology
 
     keep = np.ones(len(faces), bool)
@@ -359,7 +366,15 @@ def _ears_kept(faces: np.ndarray, may_drop: np.ndarray, passes: int = 3):
             break
         topo = edge_topology(faces[index])
         uses = topo.counts[topo.face_edges]
-        ear = ((uses == 1).sum(axis=1) == 2) & ((uses > 2).sum(axis=1) == 1) & may_drop[index]
+        crowded = (uses > 2).sum(axis=1) == 1
+        ear = ((uses == 1).sum(axis=1) == 2) & crowded & may_drop[index]
+        if not ear.any():
+            # a flap: one open edge, on an edge it crowds; one per crowded edge, the last
+            edge = np.where(uses > 2, topo.face_edges, -1).max(axis=1)
+            flap = np.flatnonzero(((uses == 1).sum(axis=1) == 1) & crowded & may_drop[index])
+            flap = flap[::-1][np.unique(edge[flap[::-1]], return_index=True)[1]]
+            ear = np.zeros(len(index), bool)
+            ear[flap] = True
         if not ear.any():
             break
         keep[index[ear]] = False
@@ -672,15 +687,17 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
         ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
+    from .field import grid_layout
     from .tile_runners import available_cores, run_tiles
 
     progress = progress or no_progress
     spacing = 1.0 / settings.resolution
     tiles = plan_tiles(points, spacing, tile_cells)
-    # the nodes lie half a cell off the lowest point: anchored on it, the scan's lowest surface
-    # (a floor), and any parallel one a whole number of cells away, lies on a node plane, where
-    # the cover's iso-value of one cell meets the next nodes and marching cubes cuts slivers
-    anchor = points.min(axis=0) - 0.5 * spacing
+    # the tiles' nodes are the nodes one grid over the whole cloud would have, so tiling
+    # changes where the field is read nowhere (anchored on the lowest point instead, a floor
+    # and the walls a whole number of cells from it lie on node planes, where the cover's
+    # iso-value of one cell meets the next nodes and marching cubes cuts slivers)
+    anchor = grid_layout(points, settings.resolution, 0.0)[1]
     reach = tile_reach(settings, spacing)
 
     def job(number: int) -> tuple:

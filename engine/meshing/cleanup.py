@@ -42,16 +42,20 @@ def find_specks(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.n
     speck = small & (piece_area[label] < CRUMB_AREA)
     rest = np.nonzero(small & ~speck)[0]
     if len(rest):
-        cents = vertices[faces].mean(axis=1) / spacing
+        cents = vertices[faces[rest]].mean(axis=1) / spacing
+        tree = cKDTree(cents)
         near = np.zeros(len(rest), bool)
-        if (~small).any():
-            dist, _ = cKDTree(cents[~small]).query(cents[rest], k=1,
-                                                  distance_upper_bound=ON_SHEET, workers=query_threads())
-            near = np.isfinite(dist)
+        large = np.flatnonzero(~small)
+        for start in range(0, len(large), mesh_ops.NORMALS_CHUNK):  # the large pieces' faces
+            part = faces[large[start:start + mesh_ops.NORMALS_CHUNK]]
+            found = tree.query_ball_point(vertices[part].mean(axis=1) / spacing,
+                                          np.nextafter(ON_SHEET, 0), workers=query_threads())
+            near[np.concatenate([np.zeros(0, np.int64)]
+                                + [np.asarray(f, np.int64) for f in found if f])] = True
         # small pieces lying on a larger small piece
         k = min(SMALL_NEIGHBOURS, len(rest))
-        dist, idx = cKDTree(cents[rest]).query(cents[rest], k=k, distance_upper_bound=ON_SHEET,
-                                              workers=query_threads())
+        dist, idx = tree.query(cents, k=k, distance_upper_bound=ON_SHEET,
+                               workers=query_threads())
         found = np.isfinite(dist)
         other = rest[np.where(found, idx, 0)]
         larger = piece_area[label[other]] > piece_area[label[rest]][:, None]

@@ -57,12 +57,23 @@ def dual_edges(faces: np.ndarray, topo: EdgeTopology = None):
     return sides // 3, side_edge[sides[:, 0]]
 
 
+NORMALS_CHUNK = 1 << 18
+"""Faces :func:`face_normals` works on at once: its temporaries follow this, not the mesh."""
+
+
 def face_normals(vertices: np.ndarray, faces: np.ndarray):
     """Unit face normals (m, 3) and face areas (m,), same units as the vertices squared."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    cross = np.cross(b - a, c - a)
-    norm = np.linalg.norm(cross, axis=1)
-    return cross / np.maximum(norm, 1e-300)[:, None], 0.5 * norm
+    dtype = np.result_type(vertices.dtype, np.float32)
+    normals = np.empty((len(faces), 3), dtype)
+    area = np.empty(len(faces), dtype)
+    for start in range(0, len(faces), NORMALS_CHUNK):
+        part = faces[start:start + NORMALS_CHUNK]
+        a, b, c = (vertices[part[:, k]] for k in range(3))
+        cross = np.cross(b - a, c - a)
+        norm = np.linalg.norm(cross, axis=1)
+        normals[start:start + len(part)] = cross / np.maximum(norm, 1e-300)[:, None]
+        area[start:start + len(part)] = 0.5 * norm
+    return normals, area
 
 
 def centroid_matrix(n: int, faces: np.ndarray):

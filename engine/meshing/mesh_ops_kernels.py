@@ -16,52 +16,59 @@ import numba
 import numpy as np
 
 
+@numba.njit(nogil=True, cache=True, inline="always")
+def _side(faces, s):
+    """Face side ``s`` (``3 * face + corner``): its smaller and larger vertex."""
+    f, k = s // 3, s % 3
+    a, b = faces[f, k], faces[f, (k + 1) % 3]
+    return min(a, b), max(a, b)
+
+
 @numba.njit(nogil=True, cache=True)
 def edge_topology(faces, n):
     """Unique edges (E, 2) sorted (as ``np.unique`` of ``lo * n + hi``), the edge of every face
     side (m * 3,) and how many sides use each edge (E,), for faces (m, 3) int64 over n
-    vertices."""
-    m = faces.shape[0]
-    sides = 3 * m
-    lo = np.empty(sides, np.int64)
-    hi = np.empty(sides, np.int64)
+    vertices. Beside the outputs it holds two numbers per side (its larger vertex, its place
+    in the order): the edges are stored once they are counted."""
+    sides = 3 * faces.shape[0]
     start = np.zeros(n + 1, np.int64)
-    for f in range(m):
-        for k in range(3):
-            a, b = faces[f, k], faces[f, (k + 1) % 3]
-            s = 3 * f + k
-            lo[s], hi[s] = min(a, b), max(a, b)
-            start[lo[s] + 1] += 1
+    high = np.empty(sides, np.int64)
+    for s in range(sides):
+        lo, high[s] = _side(faces, s)
+        start[lo + 1] += 1
     for v in range(n):
         start[v + 1] += start[v]
     fill = start[:-1].copy()
     order = np.empty(sides, np.int64)
     for s in range(sides):  # by smaller vertex, then by side (stable)
-        order[fill[lo[s]]] = s
-        fill[lo[s]] += 1
+        lo, hi = _side(faces, s)
+        order[fill[lo]] = s
+        fill[lo] += 1
     inverse = np.empty(sides, np.int64)
-    edges = np.empty((sides, 2), np.int64)
-    counts = np.zeros(sides, np.int64)
-    count = 0
+    unique = 0
     for v in range(n):
         a, b = start[v], start[v + 1]
         for i in range(a + 1, b):  # insertion sort of the bucket by larger vertex
             s = order[i]
             j = i - 1
-            while j >= a and hi[order[j]] > hi[s]:
+            while j >= a and high[order[j]] > high[s]:
                 order[j + 1] = order[j]
                 j -= 1
             order[j + 1] = s
         previous = -1
         for i in range(a, b):
             s = order[i]
-            if hi[s] != previous:
-                previous = hi[s]
-                edges[count, 0], edges[count, 1] = v, previous
-                count += 1
-            inverse[s] = count - 1
-            counts[count - 1] += 1
-    return edges[:count].copy(), inverse, counts[:count].copy()
+            if high[s] != previous:
+                previous = high[s]
+                unique += 1
+            inverse[s] = unique - 1
+    edges = np.empty((unique, 2), np.int64)
+    counts = np.zeros(unique, np.int64)
+    for s in range(sides):
+        e = inverse[s]
+        edges[e, 0], edges[e, 1] = _side(faces, s)
+        counts[e] += 1
+    return edges, inverse, counts
 
 
 @numba.njit(nogil=True, cache=True, inline="always")

@@ -259,7 +259,7 @@ def test_only_the_seam_is_stitched():
 
     step = 1.0 / 64
     left = _punch(_grid_sheet(-1.0, 0.0, 1.0, step), -0.5, step)             # deep inside
-    right = _punch(_grid_sheet(0.0, 1.0, 1.0, step), 2.0 * step + 1e-9, step)  # at the border
+    right = _punch(_grid_sheet(0.0, 1.0, 1.0, step), 1e-9, step)  # at the border
     inf = np.full(3, np.inf)
     tiles = [Tile((0, 0, 0), -inf, np.array([0.0, np.inf, np.inf])),
              Tile((1, 0, 0), np.array([0.0, -np.inf, -np.inf]), inf)]
