@@ -7,7 +7,10 @@ For each tile size: reconstructs the cloud in tiles, keeps the tiles' pieces as 
 received them (each tile's seam in memory, the rest in a file: ``engine.tiles.TilePiece``), then
 stitches them again under tracemalloc and prints the faces, the seam's share of them (the faces
 stitching may change, with the faces around them), the seconds, and the peak of numpy's
-allocations above the seams it is handed, output included, in MB and per face.
+allocations above the seams it is handed, in MB and per face: gathered into one mesh in memory
+(``engine.tiles.stitch``, as ``reconstruct()`` returns it, the output included), and read block
+by block as a file writer reads it (``StitchedMesh.vertex_blocks``/``face_blocks``, as the CLI
+writes a PLY).
 """
 
 import argparse
@@ -34,8 +37,9 @@ def main():
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     cloud = read_point_cloud(args.cloud)
-    stitch = tiles.stitch
-    print("tile cells | tiles | faces | seam share | stitch s | peak MB | bytes / face")
+    stitched_mesh = tiles.stitched_mesh
+    print("tile cells | tiles | faces | seam share | stitch s | peak MB | bytes / face | "
+          "streamed peak MB | bytes / face")
     for cells in args.tile_cells:
         with tempfile.TemporaryDirectory() as folder:
             captured = []
@@ -49,26 +53,36 @@ def main():
                     kept.append(dataclasses.replace(
                         piece, rest=tiles.TileRest(piece.rest.piece_rest, path)))
                 captured.append((kept, tile_list, spacing))
-                return stitch(pieces, tile_list, spacing, min_component_faces)
+                return stitched_mesh(pieces, tile_list, spacing, min_component_faces)
 
-            tiles.stitch = capture
+            tiles.stitched_mesh = capture
             try:
                 reconstruct(cloud, {"resolution": args.resolution, "tile_cells": cells,
                                     "workers": args.workers})
             finally:
-                tiles.stitch = stitch
+                tiles.stitched_mesh = stitched_mesh
             pieces, tile_list, spacing = captured[-1]
             faces = sum(int(piece.piece_faces.sum()) for piece in pieces)
             seam = len(tiles._seam(pieces, spacing).faces)
             tracemalloc.start()
             base = tracemalloc.get_traced_memory()[0]
             start = time.perf_counter()
-            stitch(pieces, tile_list, spacing)
+            tiles.stitch(list(pieces), tile_list, spacing)
             seconds = time.perf_counter() - start
             peak = tracemalloc.get_traced_memory()[1] - base
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            stitched, _ = tiles.stitched_mesh(list(pieces), tile_list, spacing)
+            for _ in stitched.vertex_blocks():
+                pass
+            for _ in stitched.face_blocks():
+                pass
+            del stitched
+            streamed = tracemalloc.get_traced_memory()[1] - base
             tracemalloc.stop()
         print(f"{cells} | {len(tile_list)} | {faces:,} | {100 * seam / faces:.0f} % | "
-              f"{seconds:.1f} | {peak / 2 ** 20:.0f} | {peak / faces:.0f}", flush=True)
+              f"{seconds:.1f} | {peak / 2 ** 20:.0f} | {peak / faces:.0f} | "
+              f"{streamed / 2 ** 20:.0f} | {streamed / faces:.0f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -110,7 +110,8 @@ def write_cloud(rooms: int, points: int, seed: int, path: str) -> None:
     print(f"wrote {path}: {len(cloud):,} points of a floor of {rooms} rooms", file=sys.stderr)
 
 
-def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int) -> dict:
+def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int,
+             udf_source: str = "network") -> dict:
     """Ours as the CLI runs it: into a PLY file, tile by tile when tiled."""
     from engine.reconstruct_to_file import reconstruct_to_file
 
@@ -118,7 +119,8 @@ def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int) -> dict:
     started = time.perf_counter()
     result = reconstruct_to_file(cloud, folder / "ours.ply",
                                  dict(detail="voxel_size", voxel_size=voxel,
-                                      tile_cells=tile_cells, workers=workers))
+                                      tile_cells=tile_cells, workers=workers,
+                                      udf_source=udf_source))
     seconds = time.perf_counter() - started
     return {"seconds": seconds, "tiles": result.stats.get("tiles", 1),
             "workers": result.stats.get("workers", 1), "faces": result.stats["faces"],
@@ -163,7 +165,8 @@ def child(args) -> None:
     sampler = threading.Thread(target=sample, daemon=True)
     sampler.start()
     if args.child == "ours":
-        figures = run_ours(folder, args.voxel_size, args.tile_cells, args.workers)
+        figures = run_ours(folder, args.voxel_size, args.tile_cells, args.workers,
+                           args.udf_source)
     else:
         figures = run_poisson(folder, args.poisson_depth)
     done.set()
@@ -174,6 +177,9 @@ def child(args) -> None:
 
 
 TRACE_SECONDS = 5.0
+
+NEAREST = {"network": "", "nearest": ", nearest-point field"}
+"""What the row's name adds for each ``--udf-source``."""
 
 
 def score(vertices, faces, folder: Path, truth, seed: int = 0) -> dict:
@@ -307,6 +313,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--write-cloud", metavar="PLY",
                         help="write the floor's scan (--rooms, --points, --seed) as a point "
                              "cloud file for Blender or the CLI, and run nothing else")
+    parser.add_argument("--udf-source", choices=("network", "nearest"), default="network",
+                        help="nearest: the distance to the nearest point instead of the "
+                             "network, to exercise tiling and stitching at scale in less time "
+                             "(a rougher surface; its own JSON file and row)")
     parser.add_argument("--child", choices=("ours", "poisson"), help=argparse.SUPPRESS)
 
 
@@ -341,7 +351,7 @@ def run(args) -> int:
         command = [sys.executable, "-m", "lab", "scale", "--child", method, "--work",
                    str(folder.resolve()), "--voxel-size", str(args.voxel_size), "--tile-cells",
                    str(args.tile_cells), "--workers", str(args.workers), "--poisson-depth",
-                   str(args.poisson_depth)]
+                   str(args.poisson_depth), "--udf-source", args.udf_source]
         done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
         if done.returncode:
             sys.stderr.write(done.stderr[-4000:])
@@ -349,6 +359,8 @@ def run(args) -> int:
                   file=sys.stderr)
             return 1
         figures = json.loads(done.stdout.strip().splitlines()[-1])
+        made = {key: value for key, value in figures.items() if key != "rss_trace"}
+        print(f"{method} made, scoring: {json.dumps(made)}", file=sys.stderr, flush=True)
         if method == "ours":
             from engine.io import read_mesh
 
@@ -360,13 +372,14 @@ def run(args) -> int:
         del mesh
         figures.update(score(vertices, faces, folder, truth))
         del vertices, faces
-        name = (f"ours (voxel {args.voxel_size * 100:g} cm)" if method == "ours"
-                else f"poisson (depth {args.poisson_depth})")
+        name = (f"ours (voxel {args.voxel_size * 100:g} cm{NEAREST[args.udf_source]})"
+                if method == "ours" else f"poisson (depth {args.poisson_depth})")
         rows[name] = figures
         shown = {key: value for key, value in figures.items() if key != "rss_trace"}
         print(name, json.dumps(shown), file=sys.stderr, flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    name = f"floor_{args.rooms}r_{args.points}p_{args.voxel_size * 100:g}cm.json"
+    name = (f"floor_{args.rooms}r_{args.points}p_{args.voxel_size * 100:g}cm"
+            f"{'_nearest' if args.udf_source == 'nearest' else ''}.json")
     settings = {key: value for key, value in vars(args).items() if key not in ("child", "report")}
     (out / name).write_text(json.dumps({"settings": settings, "rows": rows}, indent=1))
     print(report([out / name]), end="")

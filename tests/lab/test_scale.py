@@ -36,6 +36,17 @@ def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys, monkeypatch):
     assert status == 1
     assert "reusing" in err and "set tile cells to at most 2,048" in err and "ours failed" in err
 
+    # the nearest-point field, for the tiles' and the stitcher's memory at scale in less time:
+    # a file and a row of its own, beside the network's
+    status = main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.04",
+                   "--tile-cells", "48", "--no-poisson", "--udf-source", "nearest",
+                   "--work", str(tmp_path / "work"), "--out", str(out)])
+    assert status == 0
+    assert json.loads(path.read_text())["rows"] == rows
+    nearest = json.loads((out / "floor_1r_20000p_4cm_nearest.json").read_text())["rows"]
+    row = nearest["ours (voxel 4 cm, nearest-point field)"]
+    assert row["tiles"] == ours["tiles"] and row["faces"] > 0 and row["cd_cm"] < 5.0
+
 
 def test_write_cloud_writes_the_scan_the_benchmark_reconstructs(tmp_path):
     import numpy as np
