@@ -3,10 +3,12 @@
 The closest point on the triangles themselves, so a score built on it does not depend on how
 densely a surface was sampled. With Open3D (the benchmark's requirements) its ray-casting scene
 (an Embree bounding-volume hierarchy) finds it, in float32 relative to the mesh's lowest corner
-(a floor tens of metres across keeps micrometre precision); without it, a k-d tree over the
-face centroids gives candidate faces and the closest point on each is computed in float64: a
-face can only be closer than the best candidate found if its centroid lies within that distance
-plus the largest centroid-to-corner reach of the mesh's faces, and those faces are checked too.
+(a floor tens of metres across keeps micrometre precision), and the normal is the closest
+face's own, in float64 (the scene's float32 normal of a sliver can be nan); without it, a k-d
+tree over the face centroids gives candidate faces and the closest point on each is computed
+in float64: a face can only be closer than the best candidate found if its centroid lies
+within that distance plus the largest centroid-to-corner reach of the mesh's faces, and those
+faces are checked too.
 """
 
 from typing import Tuple
@@ -21,7 +23,8 @@ _CANDIDATES = 8  # nearest centroids checked first by the numpy path
 def closest_on_mesh(points: np.ndarray, vertices: np.ndarray,
                     faces: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """For each of ``points`` (N, 3), the distance to the mesh and the unit normal of the face
-    the closest point lies on (N, 3). A mesh without faces gives ``inf`` and zero normals."""
+    the closest point lies on (N, 3). A mesh without faces gives ``inf`` and zero normals; a
+    face without area (in float64) a zero normal."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     distances = np.full(len(points), np.inf)
     normals = np.zeros((len(points), 3))
@@ -29,6 +32,8 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray,
     if len(faces) == 0 or len(points) == 0:
         return distances, normals
     vertices = np.asarray(vertices, dtype=np.float64)
+    from engine.sampling import face_areas_and_normals
+
     try:
         import open3d as o3d
     except ImportError:
@@ -44,7 +49,8 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray,
             o3d.core.Tensor(np.ascontiguousarray(queries, dtype=np.float32)))
         closest = found["points"].numpy().astype(np.float64)
         distances[start:start + _CHUNK] = np.linalg.norm(queries - closest, axis=1)
-        normals[start:start + _CHUNK] = found["primitive_normals"].numpy()
+        face = found["primitive_ids"].numpy().astype(np.int64)
+        normals[start:start + _CHUNK] = face_areas_and_normals(vertices, faces[face])[1]
     return distances, normals
 
 

@@ -64,6 +64,18 @@ def test_closest_on_mesh_is_exact_far_from_the_origin():
     assert np.all(np.isinf(empty))
 
 
+def test_closest_on_mesh_gives_a_sliver_its_own_normal():
+    # a sliver 10 m out whose apex is 1e-8 m off its base: collinear in float32, not in float64
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0],
+                         [10, 10, 0], [11, 10, 0], [10.5, 10 + 1e-8, 0]], float)
+    faces = np.array([[0, 1, 2], [3, 4, 5]])
+    queries = np.array([[10.5, 10.0, 0.5], [10.2, 10.0, -0.3], [0.2, 0.2, 0.1]])
+    distances, normals = closest_on_mesh(queries, vertices, faces)
+    assert distances == pytest.approx([0.5, 0.3, 0.1], abs=1e-6)
+    assert np.all(np.isfinite(normals))
+    assert np.allclose(np.abs(normals[:, 2]), 1.0)
+
+
 def _crops(folder, rooms):
     vertices, faces, offset = [], [], 0
     for number in range(rooms):
