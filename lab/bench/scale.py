@@ -117,7 +117,7 @@ def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int,
 
     cloud = np.load(folder / "cloud.npy")
     started = time.perf_counter()
-    result = reconstruct_to_file(cloud, folder / "ours.ply",
+    result = reconstruct_to_file(cloud, ours_path(folder, udf_source),
                                  dict(detail="voxel_size", voxel_size=voxel,
                                       tile_cells=tile_cells, workers=workers,
                                       udf_source=udf_source))
@@ -127,6 +127,11 @@ def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int,
             "cells": result.stats["cells"],
             "worker_peak_gib": (result.stats["tile_peak_bytes"] / 2 ** 30
                                 if "tile_peak_bytes" in result.stats else None)}
+
+
+def ours_path(folder: Path, udf_source: str) -> Path:
+    """Where ours is written in the work folder: a file per ``--udf-source``."""
+    return folder / ("ours_nearest.ply" if udf_source == "nearest" else "ours.ply")
 
 
 def run_poisson(folder: Path, depth: int) -> dict:
@@ -308,6 +313,10 @@ def add_arguments(parser) -> None:
                         help="folder for the clouds and the truth; a floor built there before "
                              "with the same --rooms, --points and --seed is reused")
     parser.add_argument("--out", default="bench_results/scale", help="folder for the JSON")
+    parser.add_argument("--rescore", action="store_true",
+                        help="score again the meshes the run with these settings left in "
+                             "--work, and update its JSON's scores (its time and memory "
+                             "stay); run nothing else")
     parser.add_argument("--report", action="store_true",
                         help="print the table of the JSON files in --out; run nothing")
     parser.add_argument("--write-cloud", metavar="PLY",
@@ -346,6 +355,10 @@ def run(args) -> int:
         print(f"floor of {args.rooms} rooms, {args.points:,} points: built in "
               f"{time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
     truth = dict(np.load(folder / "truth_samples.npz"))
+    name = (f"floor_{args.rooms}r_{args.points}p_{args.voxel_size * 100:g}cm"
+            f"{'_nearest' if args.udf_source == 'nearest' else ''}.json")
+    if args.rescore:
+        return rescore(args, folder, truth, out / name)
     rows = {"scan's own floor": scan_floor_score(folder, truth)}
     for method in ["ours"] + ([] if args.no_poisson else ["poisson"]):
         command = [sys.executable, "-m", "lab", "scale", "--child", method, "--work",
@@ -361,28 +374,62 @@ def run(args) -> int:
         figures = json.loads(done.stdout.strip().splitlines()[-1])
         made = {key: value for key, value in figures.items() if key != "rss_trace"}
         print(f"{method} made, scoring: {json.dumps(made)}", file=sys.stderr, flush=True)
-        if method == "ours":
-            from engine.io import read_mesh
-
-            mesh = read_mesh(folder / "ours.ply")
-            vertices, faces = mesh.vertices, mesh.faces
-        else:
-            mesh = np.load(folder / "poisson.npz")
-            vertices, faces = mesh["vertices"], mesh["faces"]
-        del mesh
-        figures.update(score(vertices, faces, folder, truth))
-        del vertices, faces
-        name = (f"ours (voxel {args.voxel_size * 100:g} cm{NEAREST[args.udf_source]})"
-                if method == "ours" else f"poisson (depth {args.poisson_depth})")
-        rows[name] = figures
+        figures.update(score_made(method, folder, truth, args.udf_source))
+        row = row_name(method, args)
+        rows[row] = figures
         shown = {key: value for key, value in figures.items() if key != "rss_trace"}
-        print(name, json.dumps(shown), file=sys.stderr, flush=True)
+        print(row, json.dumps(shown), file=sys.stderr, flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    name = (f"floor_{args.rooms}r_{args.points}p_{args.voxel_size * 100:g}cm"
-            f"{'_nearest' if args.udf_source == 'nearest' else ''}.json")
-    settings = {key: value for key, value in vars(args).items() if key not in ("child", "report")}
+    settings = {key: value for key, value in vars(args).items()
+                if key not in ("child", "report", "rescore")}
     (out / name).write_text(json.dumps({"settings": settings, "rows": rows}, indent=1))
     print(report([out / name]), end="")
+    return 0
+
+
+def row_name(method: str, args) -> str:
+    """The table's row for ``method`` (ours or poisson) run with ``args``."""
+    if method == "ours":
+        return f"ours (voxel {args.voxel_size * 100:g} cm{NEAREST[args.udf_source]})"
+    return f"poisson (depth {args.poisson_depth})"
+
+
+def score_made(method: str, folder: Path, truth, udf_source: str) -> dict:
+    """The scores of the mesh ``method`` left in the work folder."""
+    if method == "ours":
+        from engine.io import read_mesh
+
+        mesh = read_mesh(ours_path(folder, udf_source))
+        vertices, faces = mesh.vertices, mesh.faces
+    else:
+        mesh = np.load(folder / "poisson.npz")
+        vertices, faces = mesh["vertices"], mesh["faces"]
+    del mesh
+    return score(vertices, faces, folder, truth)
+
+
+def rescore(args, folder: Path, truth, path: Path) -> int:
+    """Score again the meshes a run left in the work folder (after a change to the scoring),
+    keeping the run's time and memory figures in its JSON file ``path``."""
+    if not path.exists():
+        print(f"--rescore: no {path} to update; run the benchmark first", file=sys.stderr)
+        return 1
+    run_file = json.loads(path.read_text())
+    rows = run_file["rows"]
+    rows["scan's own floor"] = scan_floor_score(folder, truth)
+    for method in ("ours", "poisson"):
+        row = row_name(method, argparse.Namespace(**run_file["settings"]))
+        made = (ours_path(folder, args.udf_source) if method == "ours"
+                else folder / "poisson.npz")
+        if row not in rows:
+            continue
+        if not made.exists():
+            print(f"--rescore: {made} is missing; {row} keeps its scores", file=sys.stderr)
+            continue
+        rows[row].update(score_made(method, folder, truth, args.udf_source))
+        print(row, "rescored", file=sys.stderr, flush=True)
+    path.write_text(json.dumps(run_file, indent=1))
+    print(report([path]), end="")
     return 0
 
 

@@ -47,6 +47,20 @@ def test_a_tiny_floor_runs_scores_and_reports(tmp_path, capsys, monkeypatch):
     row = nearest["ours (voxel 4 cm, nearest-point field)"]
     assert row["tiles"] == ours["tiles"] and row["faces"] > 0 and row["cd_cm"] < 5.0
 
+    # --rescore scores each source's own mesh again and keeps the run's time and memory
+    nearest_path = out / "floor_1r_20000p_4cm_nearest.json"
+    written = json.loads(nearest_path.read_text())
+    written["rows"]["ours (voxel 4 cm, nearest-point field)"]["cd_cm"] = -1.0
+    nearest_path.write_text(json.dumps(written))
+    assert main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.04",
+                 "--udf-source", "nearest", "--rescore", "--work", str(tmp_path / "work"),
+                 "--out", str(out)]) == 0
+    again = json.loads(nearest_path.read_text())["rows"]["ours (voxel 4 cm, nearest-point field)"]
+    assert again == row  # the same mesh, the same samples: the same scores
+    assert main(["scale", "--rooms", "1", "--points", "20000", "--voxel-size", "0.04",
+                 "--rescore", "--work", str(tmp_path / "work"), "--out", str(out)]) == 0
+    assert json.loads(path.read_text())["rows"]["ours (voxel 4 cm)"] == ours
+
 
 def test_write_cloud_writes_the_scan_the_benchmark_reconstructs(tmp_path):
     import numpy as np
