@@ -9,13 +9,17 @@ Dask (``pip install "dask[distributed]"``) is optional: ``scheduler="local"`` st
 cluster of ``workers`` processes, any other value is the address of a running scheduler
 (``tcp://host:8786``).
 
-Inside Blender (``bpy`` loaded) a fresh worker process cannot import the extension, so there the
-tiles run in Blender's own process, one after the other (the network still uses every core
-through its threads).
+Inside Blender the engine is a subpackage of the extension (``bl_ext.<repository>.<id>.engine``),
+whose ``__init__`` needs bpy, which a worker process has not: a worker first puts stand-ins for
+the packages above the engine in ``sys.modules`` (:func:`_worker_start`), so the engine imports
+alone, without Blender, and does not run Blender's ``__main__`` (:func:`_main_hidden`). Should
+the workers not start there all the same, the tiles run in Blender's own process, one after the
+other.
 """
 
 import os
 import sys
+from contextlib import contextmanager
 from typing import Callable, List, Optional, Sequence
 
 from .errors import InputError
@@ -65,15 +69,22 @@ def run_tiles(task: Callable, count: int, job: Callable[[int], tuple], workers: 
     order = send_order(count, costs)
     if scheduler:
         return _on_dask(task, order, job, workers, scheduler, progress, cancel, keep)
-    if workers <= 1 or count <= 1 or "bpy" in sys.modules:
-        results = []
-        for number in range(count):
-            check_cancel(cancel)
-            part = sub_progress(progress, number / count, (number + 1) / count)
-            part(0.0, f"tile {number + 1} of {count}")
-            results.append(keep(number, task(*job(number), progress=part, cancel=cancel)))
-        return results
-    return _in_processes(task, order, job, min(workers, count), progress, cancel, keep)
+    if workers > 1 and count > 1:
+        try:
+            return _in_processes(task, order, job, min(workers, count), progress, cancel, keep)
+        except _WorkersDidNotStart:  # inside Blender only: see the module docstring
+            progress(0.0, "worker processes could not start: making the tiles here")
+    results = []
+    for number in range(count):
+        check_cancel(cancel)
+        part = sub_progress(progress, number / count, (number + 1) / count)
+        part(0.0, f"tile {number + 1} of {count}")
+        results.append(keep(number, task(*job(number), progress=part, cancel=cancel)))
+    return results
+
+
+class _WorkersDidNotStart(Exception):
+    """Inside an extension, the worker processes could not start."""
 
 
 def _whole(number: int, result):
@@ -181,19 +192,79 @@ def _end_with_parent(parent: int) -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
+WORKER_SETUP = """
+import importlib, sys, types
+names = {names!r}
+for depth, name in enumerate(names, 1):
+    if name not in sys.modules:
+        stand_in = types.ModuleType(name)
+        stand_in.__path__ = [{folder!r}] if depth == len(names) else []
+        sys.modules[name] = stand_in
+importlib.import_module({engine!r} + ".tile_runners")._pool_worker_start({parent!r})
+"""
+"""What a worker runs first when the engine is a subpackage (``{names}``: the packages above it,
+outermost first; ``{folder}``: the innermost one's folder)."""
+
+
+def _worker_start() -> tuple:
+    """The worker pool's initializer and its arguments: :func:`_pool_worker_start`, or, when the
+    engine is a subpackage (an extension's, inside Blender), ``exec`` of :data:`WORKER_SETUP`
+    first: ``exec`` is a builtin, so sending it imports nothing of the extension."""
+    parts = __package__.split(".")
+    if len(parts) == 1:
+        return _pool_worker_start, (os.getpid(),)
+    names = [".".join(parts[:depth]) for depth in range(1, len(parts))]
+    folder = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    setup = WORKER_SETUP.format(names=names, folder=folder, engine=__package__,
+                                parent=os.getpid())
+    return exec, (setup, {})
+
+
+@contextmanager
+def _main_hidden(hide: bool):
+    """With ``hide``, ``__main__`` names no file and no module while workers start, so that a
+    spawned worker does not run it again: inside Blender ``__main__`` is the script Blender
+    runs (``--python``, without a ``__name__`` guard as often as not) or a name that is not a
+    file (``<blender string>``), and the workers need nothing of it."""
+    main = sys.modules.get("__main__")
+    if not hide or main is None:
+        yield
+        return
+    saved = {name: main.__dict__[name] for name in ("__file__", "__spec__")
+             if name in main.__dict__}
+    main.__dict__.pop("__file__", None)
+    main.__spec__ = None
+    try:
+        yield
+    finally:
+        main.__dict__.pop("__spec__", None)
+        main.__dict__.update(saved)
+
+
 def _in_processes(task, order, job, workers, progress, cancel, keep) -> List:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
+    initializer, initargs = _worker_start()
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pool_worker_start, initargs=(os.getpid(),))
+                               initializer=initializer, initargs=initargs)
     try:
-        return _windowed(lambda args: pool.submit(task, *args),
-                         lambda futures: wait(futures, timeout=POLL_SECONDS,
-                                              return_when=FIRST_COMPLETED)[0],
-                         order, job, IN_FLIGHT * workers, progress, cancel,
-                         f"on {workers} workers", keep)
+        with _main_hidden(initializer is exec):
+            if initializer is exec:  # inside an extension: do the workers start at all?
+                probe = pool.submit(os.getpid)
+                while not probe.done():
+                    check_cancel(cancel)
+                    wait([probe], timeout=POLL_SECONDS)
+                try:
+                    probe.result()
+                except BrokenProcessPool:
+                    raise _WorkersDidNotStart() from None
+            return _windowed(lambda args: pool.submit(task, *args),
+                             lambda futures: wait(futures, timeout=POLL_SECONDS,
+                                                  return_when=FIRST_COMPLETED)[0],
+                             order, job, IN_FLIGHT * workers, progress, cancel,
+                             f"on {workers} workers", keep)
     except BrokenProcessPool:
         raise InputError("the worker processes stopped before finishing (out of memory, or a "
                          "script that calls reconstruct() outside `if __name__ == "

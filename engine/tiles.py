@@ -666,7 +666,7 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
     vertices, faces = keep_core(np.asarray(meshed.mesh.vertices, np.float64),
                                 np.asarray(meshed.mesh.faces, np.int64), tile)
     return vertices, faces, {**band.stats, "iso": float(meshed.iso),
-                             "peak_bytes": process_peak_bytes()}
+                             "peak_bytes": process_peak_bytes(), "process": os.getpid()}
 
 
 def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
@@ -683,7 +683,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
         ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``,
         ``tile_peak_bytes`` (the largest peak memory of a process that ran tiles: a worker's,
-        or this process's when the tiles ran here)
+        or this process's when the tiles ran here), ``worker_processes`` (the other processes
+        that made tiles; 0 when they were made here)
     mesh_stats : dict, the stitching's numbers (``welded``, ``flipped``, ``ears_dropped``,
         ``holes_closed``), the clean-up's and ``iso`` (the tiles' median iso-level)
     """
@@ -739,6 +740,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
             for number, result in zip(turn, redone):
                 results[number] = result
                 tile_peak = max(tile_peak, result[1]["peak_bytes"])
+        processes = {band["process"] for _, band in results} - {os.getpid()}
         sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
         patch_points = 0.0
         device = "none"
@@ -761,7 +763,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     field_stats = {**sums, "tiles": len(tiles), "tile_cells": tile_cells, "spacing": spacing,
                    "workers": settings.workers or available_cores(),
                    "mean_patch_points": patch_points / max(seen, 1), "device": device,
-                   "tile_peak_bytes": tile_peak,
+                   "tile_peak_bytes": tile_peak, "worker_processes": len(processes),
                    "udf_source": udf_source}
     mesh_stats = {**stitched, "tiles_turned": int(len(turn)),
                   "iso": float(np.median(isos)) if isos else 0.0}

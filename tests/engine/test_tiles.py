@@ -113,6 +113,7 @@ def test_two_workers_give_the_same_mesh_bit_for_bit(small_tiled):
     cloud, settings, one = small_tiled
     two = reconstruct(cloud, dict(settings, workers=2))
     assert one.stats["tiles"] >= 4 and two.stats["workers"] == 2
+    assert one.stats["worker_processes"] == 0 and two.stats["worker_processes"] == 2
     assert np.array_equal(one.mesh.vertices, two.mesh.vertices)
     assert np.array_equal(one.mesh.faces, two.mesh.faces)
 
