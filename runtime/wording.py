@@ -28,6 +28,8 @@ _STAGES = (
     ("layer", "Meshing"),
     ("cover", "Meshing"),
     ("clean", "Meshing"),
+    ("stitch", "Stitching"),
+    ("tile", "Tiles"),  # "4 of 9 tiles done on 2 workers"
     ("mapping", "Finishing"),
     ("done", "Finishing"),
 )

@@ -353,6 +353,13 @@ def test_progress_is_a_short_stage_name_and_a_percentage(extension):
     assert {"Distances", "Meshing"} <= {text.rsplit(" ", 2)[0] for text in texts}
     assert wording.progress_text("network UDF: 49,152 / 84,297 queries", 0.58) == "Distances 58 %"
     assert wording.progress_text("optimising the cover (80/100)", 0.8) == "Meshing 80 %"
+    # in tiles on worker processes the engine counts the tiles, then stitches them
+    seen = []
+    reconstruct(sphere_points(POINTS, 1.0), dict(resolution=48, tile_cells=24, workers=2),
+                progress=lambda fraction, message: seen.append((fraction, message)))
+    stages = {wording.stage_name(message) for _, message in seen}
+    assert {"Tiles", "Stitching"} <= stages and "Working" not in stages, seen
+    assert wording.progress_text("4 of 9 tiles done on 2 workers", 0.37) == "Tiles 37 %"
 
 
 def finished_job(extension, quick, messages, faces=None):
