@@ -107,3 +107,20 @@ def test_a_worker_reports_its_own_peak_memory_not_its_parents():
     peaks = run_tiles(process_peak_bytes, 2, lambda number: (), workers=2)
     # a fresh worker holds the interpreter, numpy and the engine, far less than its parent
     assert all(0 < peak < own - 300 * 2 ** 20 for peak in peaks), (peaks, own)
+
+
+def test_blenders_main_is_hidden_from_starting_workers_and_given_back(monkeypatch):
+    """Inside Blender ``__main__`` is the script Blender runs (or a name that is no file): a
+    spawned worker would run it again, so while workers start it names nothing."""
+    import types
+
+    from engine.tile_runners import _main_hidden
+
+    main = types.ModuleType("__main__")
+    main.__file__ = "<blender string>"
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    with _main_hidden(True):
+        assert not hasattr(main, "__file__") and main.__spec__ is None
+    assert main.__file__ == "<blender string>"
+    with _main_hidden(False):  # the command line: scripts keep their __name__ guard
+        assert main.__file__ == "<blender string>"
