@@ -479,19 +479,67 @@ class StitchedMesh:
 
 def tiles_to_turn(pieces, tiles, spacing: float) -> np.ndarray:
     """Indices of the tiles whose kept layer faces against their neighbours' across the
-    borders (by the votes of :func:`_piece_flips`): the smaller side, by area. ``pieces``:
-    per tile, its :class:`TilePiece` or its ``(vertices, faces)``."""
-    seam = _seam(_split_all(pieces, tiles, spacing), spacing)
-    if not len(seam.a):
+    borders (by the votes of :func:`_pair_agreement`): the smaller side, by area. ``pieces``:
+    per tile, its :class:`TilePiece` or its ``(vertices, faces)``.
+
+    The votes are gathered tile by tile, each from the seams of the tile and its neighbours
+    alone (:func:`_tile_votes`), so memory follows a few tiles' seams, not the scene's; they
+    are the votes all the seams at once would give (before any weld no face spans two tiles,
+    and every vertex a weld candidate can reach lies in a neighbouring tile).
+    """
+    pieces = _split_all(pieces, tiles, spacing)
+    piece_first = np.cumsum([0] + [len(piece.piece_area) for piece in pieces])
+    count = int(piece_first[-1])
+    number_of = {tile.index: number for number, tile in enumerate(tiles)}
+    votes = []
+    for number, tile in enumerate(tiles):
+        window = sorted({number_of[neighbour] for neighbour in _around(tile.index)
+                         if neighbour in number_of})
+        votes.append(_tile_votes(pieces, piece_first, window, number, spacing))
+    pa, pb, agree = (np.concatenate(column) for column in zip(*votes)) if votes else (
+        np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    if not len(pa):
         return np.zeros(0, np.int64)
-    flip = _piece_flips(seam.points, seam.faces, seam.face_piece,
-                        len(seam.piece_tile), seam.a, seam.b)
-    area = seam.piece_area
+    flip = _flips_from_votes(pa, pb, agree, count)
+    area = np.concatenate([piece.piece_area for piece in pieces])
     if area[flip].sum() > area[~flip].sum():
         flip = ~flip  # an open sheet's orientation is free: turn the smaller side
-    share = np.bincount(seam.piece_tile, weights=area * flip, minlength=len(pieces))
-    total = np.bincount(seam.piece_tile, weights=area, minlength=len(pieces))
+    piece_tile = np.repeat(np.arange(len(pieces)), np.diff(piece_first))
+    share = np.bincount(piece_tile, weights=area * flip, minlength=len(pieces))
+    total = np.bincount(piece_tile, weights=area, minlength=len(pieces))
     return np.flatnonzero(share > 0.5 * np.maximum(total, 1e-300))
+
+
+def _around(index: Tuple[int, int, int]):
+    """The tile indices of ``index`` and its 26 neighbours."""
+    i, j, k = index
+    return [(i + di, j + dj, k + dk) for di in (-1, 0, 1) for dj in (-1, 0, 1)
+            for dk in (-1, 0, 1)]
+
+
+def _tile_votes(pieces: list, piece_first: np.ndarray, window: list, number: int,
+                spacing: float):
+    """The votes of the weld pairs between tile ``number`` and the higher-numbered tiles of
+    ``window`` (tile numbers, ascending, ``number`` among them): the two pieces of each pair
+    (numbered across all tiles) and whether their normals agree (:func:`_pair_agreement`)."""
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    if len(window) < 2:
+        return empty
+    seam = _seam([pieces[member] for member in window], spacing)
+    if not len(seam.a):
+        return empty
+    member = np.searchsorted(seam.offsets, seam.ids, side="right") - 1  # per seam vertex
+    tile_of = np.asarray(window)[member]
+    ta, tb = tile_of[seam.a], tile_of[seam.b]
+    mine = ((ta == number) & (tb > number)) | ((tb == number) & (ta > number))
+    a, b = seam.a[mine], seam.b[mine]
+    if not len(a):
+        return empty
+    agree = _pair_agreement(seam.points, seam.faces, a, b)
+    piece = _vertex_pieces(len(seam.points), seam.faces, seam.face_piece)
+    # the window's pieces are numbered member after member: renumber them across all tiles
+    first = np.asarray([piece_first[tile] for tile in window]) - seam.piece_first
+    return (piece[a] + first[member[a]], piece[b] + first[member[b]], agree)
 
 
 def _pairs_across(points: np.ndarray, tile_of: np.ndarray, spacing: float):
@@ -562,31 +610,42 @@ def _mutual_nearest_across(points: np.ndarray, tile_of: np.ndarray, reach: float
 
 def _piece_flips(vertices, faces, face_piece, count, a, b) -> np.ndarray:
     """Which pieces to turn over so that their faces at welded pairs face as their
-    neighbours' do: (count,) bool.
+    neighbours' do: (count,) bool. ``face_piece`` (m,) numbers the pieces (``count`` of them)
+    per face; ``a``, ``b``: the welded pairs (see :func:`_flips_from_votes`)."""
+    agree = _pair_agreement(vertices, faces, a, b)
+    piece = _vertex_pieces(len(vertices), faces, face_piece)
+    return _flips_from_votes(piece[a], piece[b], agree, count)
 
-    Each welded pair votes (the normals of the few rings around its two vertices agree or not)
-    between the two pieces it joins; a spanning forest over the pieces, strongest votes first,
-    fixes each piece's parity. ``face_piece`` (m,) numbers the pieces (``count`` of them) per face.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import minimum_spanning_tree
 
-    from .meshing.mesh_ops import face_normals
+def _vertex_pieces(count: int, faces: np.ndarray, face_piece: np.ndarray) -> np.ndarray:
+    """The piece of each vertex (of its faces')."""
+    piece = np.zeros(count, np.int64)
+    for k in range(3):
+        piece[faces[:, k]] = face_piece
+    return piece
 
-    from .meshing.mesh_ops import incidence_matrix
+
+def _pair_agreement(vertices, faces, a, b) -> np.ndarray:
+    """Per pair ``(a, b)`` of vertices, the dot product of their normals: the area-weighted
+    normals of the few rings of faces around each (the faces at a tile's cut are slivers)."""
+    from .meshing.mesh_ops import face_normals, incidence_matrix
 
     normals, areas = face_normals(vertices, faces)
-    # the normal of the few rings around each vertex: the faces at a tile's cut are slivers
     incidence = incidence_matrix(len(vertices), faces)  # vertices x faces
     vertex_normal = incidence @ (normals * areas[:, None])
     for _ in range(NORMAL_RINGS):
         vertex_normal = incidence @ (incidence.T @ vertex_normal)
     vertex_normal /= np.maximum(np.linalg.norm(vertex_normal, axis=1), 1e-300)[:, None]
-    agree = np.einsum("ij,ij->i", vertex_normal[a], vertex_normal[b])
-    piece = np.zeros(len(vertices), np.int64)
-    for k in range(3):
-        piece[faces[:, k]] = face_piece
-    pa, pb = piece[a], piece[b]
+    return np.einsum("ij,ij->i", vertex_normal[a], vertex_normal[b])
+
+
+def _flips_from_votes(pa, pb, agree, count: int) -> np.ndarray:
+    """Which of ``count`` pieces to turn over: each pair of pieces ``(pa, pb)`` votes with the
+    sign of ``agree`` (its normals' dot product); a spanning forest over the pieces, strongest
+    votes first, fixes each piece's parity. (count,) bool."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
     between = pa != pb
     pa, pb, agree = pa[between], pb[between], agree[between]
     if not len(pa):

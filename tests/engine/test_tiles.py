@@ -301,3 +301,37 @@ def test_tiles_cut_axis_aligned_walls_into_as_few_faces_as_one_grid():
     area = [face_normals(mesh.vertices, mesh.faces)[1].sum() for mesh in (whole, tiled)]
     assert abs(area[1] / area[0] - 1.0) < 0.01
     assert len(tiled.faces) < 1.05 * len(whole.faces), (len(tiled.faces), len(whole.faces))
+
+
+def test_the_turn_votes_gathered_tile_by_tile_are_those_of_all_seams_at_once(monkeypatch):
+    """Each tile's window (itself and its neighbours) finds exactly the weld pairs, and their
+    votes, that the seams of all tiles joined give."""
+    from engine import tiles as tiling
+
+    captured = []
+    stitched_mesh = tiling.stitched_mesh
+
+    def capture(pieces, tile_list, spacing, min_component_faces=0):
+        captured.append((tiling._split_all(list(pieces), tile_list, spacing), tile_list,
+                         spacing))
+        return stitched_mesh(pieces, tile_list, spacing, min_component_faces)
+
+    monkeypatch.setattr(tiling, "stitched_mesh", capture)
+    reconstruct(hemisphere_cloud(8_000, seed=3),
+                dict(detail="resolution", resolution=80, tile_cells=24, workers=1))
+    pieces, tile_list, spacing = captured[-1]
+    assert len(tile_list) >= 12
+    seam = tiling._seam(pieces, spacing)
+    agree = tiling._pair_agreement(seam.points, seam.faces, seam.a, seam.b)
+    piece = tiling._vertex_pieces(len(seam.points), seam.faces, seam.face_piece)
+    whole = sorted(zip(np.minimum(piece[seam.a], piece[seam.b]).tolist(),
+                       np.maximum(piece[seam.a], piece[seam.b]).tolist(), agree.tolist()))
+    piece_first = np.cumsum([0] + [len(p.piece_area) for p in pieces])
+    number_of = {tile.index: number for number, tile in enumerate(tile_list)}
+    windowed = []
+    for number, tile in enumerate(tile_list):
+        window = sorted({number_of[n] for n in tiling._around(tile.index) if n in number_of})
+        pa, pb, votes = tiling._tile_votes(pieces, piece_first, window, number, spacing)
+        windowed += zip(np.minimum(pa, pb).tolist(), np.maximum(pa, pb).tolist(), votes.tolist())
+    assert len(whole) > 100
+    assert sorted(windowed) == whole
