@@ -7,10 +7,10 @@ For each tile size: reconstructs the cloud in tiles, keeps the tiles' pieces as 
 received them (each tile's seam in memory, the rest in a file: ``engine.tiles.TilePiece``), then
 stitches them again under tracemalloc and prints the faces, the seam's share of them (the faces
 stitching may change, with the faces around them), the seconds, and the peak of numpy's
-allocations above the seams it is handed, in MB and per face: gathered into one mesh in memory
-(``engine.tiles.stitch``, as ``reconstruct()`` returns it, the output included), and read block
-by block as a file writer reads it (``StitchedMesh.vertex_blocks``/``face_blocks``, as the CLI
-writes a PLY).
+allocations above the seams it is handed, in MB and per face: choosing the tiles to turn
+(``engine.tiles.tiles_to_turn``), gathered into one mesh in memory (``engine.tiles.stitch``, as
+``reconstruct()`` returns it, the output included), and read block by block as a file writer
+reads it (``StitchedMesh.vertex_blocks``/``face_blocks``, as the CLI writes a PLY).
 """
 
 import argparse
@@ -37,14 +37,14 @@ def main():
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     cloud = read_point_cloud(args.cloud)
-    stitched_mesh = tiles.stitched_mesh
-    print("tile cells | tiles | faces | seam share | stitch s | peak MB | bytes / face | "
-          "streamed peak MB | bytes / face")
+    stitched_in_blocks = tiles.stitched_in_blocks
+    print("tile cells | tiles | faces | seam share | stitch s | turn peak MB | bytes / face | "
+          "peak MB | bytes / face | streamed peak MB | bytes / face")
     for cells in args.tile_cells:
         with tempfile.TemporaryDirectory() as folder:
             captured = []
 
-            def capture(pieces, tile_list, spacing, min_component_faces=0):
+            def capture(pieces, tile_list, spacing, min_component_faces=0, into=None):
                 # the tiles' files go with the reconstruction's folder: keep copies
                 kept = []
                 for number, piece in enumerate(pieces):
@@ -53,18 +53,23 @@ def main():
                     kept.append(dataclasses.replace(
                         piece, rest=tiles.TileRest(piece.rest.piece_rest, path)))
                 captured.append((kept, tile_list, spacing))
-                return stitched_mesh(pieces, tile_list, spacing, min_component_faces)
+                return stitched_in_blocks(pieces, tile_list, spacing, min_component_faces,
+                                          into)
 
-            tiles.stitched_mesh = capture
+            tiles.stitched_in_blocks = capture
             try:
                 reconstruct(cloud, {"resolution": args.resolution, "tile_cells": cells,
                                     "workers": args.workers})
             finally:
-                tiles.stitched_mesh = stitched_mesh
+                tiles.stitched_in_blocks = stitched_in_blocks
             pieces, tile_list, spacing = captured[-1]
             faces = sum(int(piece.piece_faces.sum()) for piece in pieces)
             seam = len(tiles._seam(pieces, spacing).faces)
             tracemalloc.start()
+            base = tracemalloc.get_traced_memory()[0]
+            tiles.tiles_to_turn(list(pieces), tile_list, spacing)
+            turn = tracemalloc.get_traced_memory()[1] - base
+            tracemalloc.reset_peak()
             base = tracemalloc.get_traced_memory()[0]
             start = time.perf_counter()
             tiles.stitch(list(pieces), tile_list, spacing)
@@ -72,7 +77,7 @@ def main():
             peak = tracemalloc.get_traced_memory()[1] - base
             tracemalloc.reset_peak()
             base = tracemalloc.get_traced_memory()[0]
-            stitched, _ = tiles.stitched_mesh(list(pieces), tile_list, spacing)
+            stitched, _ = tiles.stitched_in_blocks(list(pieces), tile_list, spacing, 0, folder)
             for _ in stitched.vertex_blocks():
                 pass
             for _ in stitched.face_blocks():
@@ -81,7 +86,8 @@ def main():
             streamed = tracemalloc.get_traced_memory()[1] - base
             tracemalloc.stop()
         print(f"{cells} | {len(tile_list)} | {faces:,} | {100 * seam / faces:.0f} % | "
-              f"{seconds:.1f} | {peak / 2 ** 20:.0f} | {peak / faces:.0f} | "
+              f"{seconds:.1f} | {turn / 2 ** 20:.0f} | {turn / faces:.0f} | "
+              f"{peak / 2 ** 20:.0f} | {peak / faces:.0f} | "
               f"{streamed / 2 ** 20:.0f} | {streamed / faces:.0f}", flush=True)
 
 

@@ -14,12 +14,15 @@ Stitching. Boundary vertices of different tiles within :data:`SAME_CELLS` of eac
 vertex meshed by both and are merged; the others that are each other's nearest across tiles
 within :data:`WELD_CELLS` cells are welded (to their mean). The two sides of an open sheet are
 equally good layers, and a tile may keep the other side than its neighbours: such a tile is made
-again keeping the side they kept (:func:`tiles_to_turn`), since the two sides share no vertices
-along the border; a piece still facing the other way is turned over. A face both tiles kept
-is kept once, faces left hanging on a weld are dropped and the holes left along the seam (up to
-:data:`SEAM_HOLE_EDGES` edges) are closed. Each tile's own mesh is already clean, so only the
-seam (the faces with a vertex within :data:`SEAM_CELLS` of their tile's core border, and the
-faces around them) is welded and tidied; the other faces pass through as they are.
+again keeping the side they kept (:func:`tiles_to_turn`, which reads a tile and its neighbours
+at a time), since the two sides share no vertices along the border; a piece still facing the
+other way is turned over. A face both tiles kept is kept once, faces left hanging on a weld are
+dropped and the holes left along the seam (up to :data:`SEAM_HOLE_EDGES` edges) are closed.
+Each tile's own mesh is already clean, so only the seam (the faces with a vertex within
+:data:`SEAM_CELLS` of their tile's core border, and the faces around them) is welded and
+tidied; the other faces pass through as they are. The seams are stitched in two rounds
+(:func:`stitched_in_blocks`): within blocks of :data:`BLOCK_TILES` tiles per side, then
+between the blocks, so that no step holds every tile's seam at once.
 
 Tiles are made one after the other in this process, in worker processes or on a Dask cluster
 (:mod:`.tile_runners`), with the same result.
@@ -119,6 +122,9 @@ class TilePiece:
     (``seam_zone``: a vertex near the border) and the faces sharing a vertex with them, so that
     every edge of a zone face has all of its faces here; ``seam_piece``: their pieces (the
     tile's vertex-connected components). Per piece: ``piece_area`` and ``piece_faces``.
+    ``seam_tile``: the tile each seam vertex was made in (its number among all tiles; a block
+    of tiles stitched together keeps its vertices' tiles, -1 for a copy a bow-tie split made):
+    welds join vertices of different tiles only.
 
     The rest, read only to assemble the output: ``rest`` (:class:`TileRest`).
     """
@@ -127,6 +133,7 @@ class TilePiece:
     seam_ids: np.ndarray
     seam_points: np.ndarray
     seam_near: np.ndarray
+    seam_tile: np.ndarray
     seam_faces: np.ndarray
     seam_zone: np.ndarray
     seam_piece: np.ndarray
@@ -153,9 +160,11 @@ class TileRest:
 
 
 def split_tile(vertices: np.ndarray, faces: np.ndarray, tile: Tile, spacing: float,
-               path: Optional[str] = None) -> TilePiece:
+               path: Optional[str] = None, number: int = 0,
+               vertex_tile: Optional[np.ndarray] = None) -> TilePiece:
     """A tile's kept faces split into its seam (held) and the rest (written to ``path``, an
-    ``.npz`` file, when given; else held too). See :class:`TilePiece`."""
+    ``.npz`` file, when given; else held too). See :class:`TilePiece`. ``number``: the tile's
+    among all tiles; ``vertex_tile``, given, each vertex's tile instead (a block's)."""
     from .meshing.mesh_ops import face_normals, vertex_components
 
     v = np.asarray(vertices, np.float64).reshape(-1, 3)
@@ -176,7 +185,9 @@ def split_tile(vertices: np.ndarray, faces: np.ndarray, tile: Tile, spacing: flo
     if path is not None:
         np.savez(path, **rest)
         rest = path
-    return TilePiece(len(v), np.flatnonzero(on_seam), v[on_seam], close[on_seam],
+    seam_tile = (np.full(int(on_seam.sum()), number, np.int32) if vertex_tile is None
+                 else np.asarray(vertex_tile, np.int32)[on_seam])
+    return TilePiece(len(v), np.flatnonzero(on_seam), v[on_seam], close[on_seam], seam_tile,
                      position[f[seam]], zone[seam], label[seam], area,
                      np.bincount(label, minlength=count),
                      TileRest(np.bincount(label[~seam], minlength=count), rest))
@@ -208,6 +219,7 @@ class _Seam:
     piece_faces: np.ndarray
     a: np.ndarray
     b: np.ndarray
+    held: Optional[np.ndarray] = None  # with a frozen border: its band's seam vertices
 
 
 SEAM_BLOCK = 1 << 20
@@ -216,13 +228,16 @@ SEAM_BLOCK = 1 << 20
 
 def _split_all(pieces, tiles, spacing: float) -> list:
     """The pieces as :class:`TilePiece` (those given as ``(vertices, faces)`` split, held)."""
-    return [piece if isinstance(piece, TilePiece) else split_tile(*piece, tile, spacing)
-            for piece, tile in zip(pieces, tiles)]
+    return [piece if isinstance(piece, TilePiece)
+            else split_tile(*piece, tile, spacing, number=number)
+            for number, (piece, tile) in enumerate(zip(pieces, tiles))]
 
 
-def _seam(pieces: list, spacing: float) -> _Seam:
+def _seam(pieces: list, spacing: float, frozen: Optional[Tile] = None) -> _Seam:
     """The tiles' seams (``pieces``: a :class:`TilePiece` per tile) joined, and the pairs of
-    their open vertices to weld."""
+    their open vertices to weld. With ``frozen`` (a block of tiles' box), the seam within
+    :data:`SEAM_CELLS` of its border is left as it is: no weld there, no face touching it in
+    the zone, for the blocks' own stitching (:func:`stitched_in_blocks`)."""
     from .meshing.mesh_ops import edge_topology
 
     offsets = np.cumsum([0] + [piece.vertex_count for piece in pieces])
@@ -235,23 +250,32 @@ def _seam(pieces: list, spacing: float) -> _Seam:
                            + [np.zeros((0, 3), np.int64)])
     points = np.concatenate([piece.seam_points for piece in pieces] + [np.zeros((0, 3))])
     near = np.concatenate([piece.seam_near for piece in pieces] + [np.zeros(0, bool)])
+    zone = np.concatenate([piece.seam_zone for piece in pieces] + [np.zeros(0, bool)])
+    held = None
+    if frozen is not None:
+        margin = np.minimum(points - frozen.low, frozen.high - points).min(axis=1)
+        held = margin < SEAM_CELLS * spacing
+        near &= ~held
+        zone &= ~held[faces].any(axis=1)
+        del margin
     a = b = empty
     if len(faces):
         topo = edge_topology(faces)
         rim = np.unique(topo.edges[topo.counts == 1])
         rim = rim[near[rim]]  # the zone's open edges are open in the whole mesh too
-        tile_of = np.searchsorted(offsets, ids[rim], side="right") - 1
+        tile_of = np.concatenate([piece.seam_tile for piece in pieces]
+                                 + [np.zeros(0, np.int32)])[rim]
         i, j = _pairs_across(points[rim], tile_of, spacing)
         a, b = rim[i], rim[j]
-    return _Seam([piece.rest for piece in pieces], offsets, ids, points, faces,
-                 np.concatenate([piece.seam_zone for piece in pieces] + [np.zeros(0, bool)]),
+    return _Seam([piece.rest for piece in pieces], offsets, ids, points, faces, zone,
                  np.concatenate([piece.seam_piece + piece_first[t]
                                  for t, piece in enumerate(pieces)] + [empty]),
                  piece_first,
                  np.concatenate([np.full(len(piece.piece_area), t, np.int64)
                                  for t, piece in enumerate(pieces)] + [empty]),
                  np.concatenate([piece.piece_area for piece in pieces] + [np.zeros(0)]),
-                 np.concatenate([piece.piece_faces for piece in pieces] + [empty]), a, b)
+                 np.concatenate([piece.piece_faces for piece in pieces] + [empty]), a, b,
+                 held)
 
 
 def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
@@ -261,13 +285,15 @@ def stitch(pieces, tiles, spacing: float, min_component_faces: int = 0):
     -------
     vertices : (n, 3) float64; faces : (m, 3) int64; stats : dict, as :func:`stitched_mesh`
     """
-    stitched, stats = stitched_mesh(pieces, tiles, spacing, min_component_faces)
+    stitched, stats = stitched_in_blocks(pieces, tiles, spacing, min_component_faces)
     return stitched.arrays() + (stats,)
 
 
-def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
+def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0,
+                  frozen: Optional[Tile] = None):
     """One mesh from the tiles' kept faces: ``pieces`` is a list with, per tile of ``tiles``,
     its :class:`TilePiece` or its ``(vertices, faces)``. The list is emptied as it is read.
+    ``frozen``: a block's box whose border band is left for a later stitch (see :func:`_seam`).
 
     Only the seam (:class:`TilePiece`) is welded and tidied: each tile's own mesh is already
     clean, so the faces away from its core's border pass through unchanged, read tile by tile
@@ -288,7 +314,7 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
 
     given = _split_all(pieces, tiles, spacing)
     pieces.clear()
-    seam = _seam(given, spacing)
+    seam = _seam(given, spacing, frozen)
     del given
     stats = {"welded": 0, "flipped": 0, "ears_dropped": 0, "holes_closed": 0,
              "cleanup_degenerate": 0, "cleanup_split_vertices": 0, "cleanup_specks": 0,
@@ -334,6 +360,11 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
     faces, zone, piece = faces[~degenerate], zone[~degenerate], piece[~degenerate]
     in_zone[:] = False
     in_zone[faces[zone]] = True
+    if seam.held is not None:  # a bow-tie beside the held band may be one once it is welded
+        held = np.zeros(len(local), bool)
+        held[:len(seam.held)] = seam.held
+        in_zone[faces[held[faces].any(axis=1)]] = False
+        del held
     before = len(local)
     local, faces = split_nonmanifold_vertices(local, faces, only=in_zone, compact=False)
     stats["cleanup_split_vertices"] = int(len(np.unique(faces[faces >= before])))
@@ -349,6 +380,58 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0):
         small = _small_pieces(seam, faces, piece, min_component_faces)
         stats["cleanup_small_pieces"] = int(small.sum())
     return StitchedMesh(seam, local, faces[~small[piece]], flip, small), stats
+
+
+BLOCK_TILES = 2
+"""Tiles per side of a block: a block's tiles are stitched together first, the band along the
+block's border left for the blocks' own stitch (:func:`stitched_in_blocks`)."""
+
+
+def plan_blocks(tiles) -> list:
+    """The tiles grouped in blocks of :data:`BLOCK_TILES` per side: per block, its box (a
+    :class:`Tile`) and its tiles' numbers, ascending."""
+    groups = {}
+    for number, tile in enumerate(tiles):
+        groups.setdefault(tuple(i // BLOCK_TILES for i in tile.index), []).append(number)
+    return [(Tile(key, np.min([tiles[m].low for m in members], axis=0),
+                  np.max([tiles[m].high for m in members], axis=0)), members)
+            for key, members in sorted(groups.items())]
+
+
+def stitched_in_blocks(pieces, tiles, spacing: float, min_component_faces: int = 0,
+                       folder: Optional[str] = None):
+    """:func:`stitched_mesh` in two rounds, so that no step holds the seams of all tiles at
+    once: the tiles of each block (:func:`plan_blocks`) stitched together, their seam within
+    :data:`SEAM_CELLS` of the block's border left as it is; each block's mesh split again
+    against the block's box (its rest written to ``folder``, when given); then the blocks
+    stitched as tiles, each seam vertex welding only to another tile's. ``pieces`` (as for
+    :func:`stitched_mesh`) is emptied as it is read.
+
+    Returns ``(stitched, stats)`` as :func:`stitched_mesh`, the stats of both rounds summed.
+    """
+    given = _split_all(pieces, tiles, spacing)
+    pieces.clear()
+    blocks, boxes, totals = [], [], {}
+    for number, (box, members) in enumerate(plan_blocks(tiles)):
+        if len(members) == 1:
+            blocks.append(given[members[0]])
+        else:
+            stitched, stats = stitched_mesh([given[m] for m in members],
+                                             [tiles[m] for m in members], spacing, 0, box)
+            vertices, faces = stitched.arrays()
+            vertex_tile = stitched.vertex_tiles(members)
+            del stitched
+            path = None if folder is None else os.path.join(folder, f"block{number}.npz")
+            blocks.append(split_tile(vertices, faces, box, spacing, path,
+                                     vertex_tile=vertex_tile))
+            del vertices, faces, vertex_tile
+            for key, value in stats.items():
+                totals[key] = totals.get(key, 0) + value
+        for member in members:
+            given[member] = None
+        boxes.append(box)
+    stitched, stats = stitched_mesh(blocks, boxes, spacing, min_component_faces)
+    return stitched, {key: value + totals.get(key, 0) for key, value in stats.items()}
 
 
 def _ears_kept(faces: np.ndarray, may_drop: np.ndarray, passes: int = 3):
@@ -447,6 +530,16 @@ class StitchedMesh:
             yield block
         n, s = int(seam.offsets[-1]), len(seam.ids)
         yield local[s:][used[n:]]
+
+    def vertex_tiles(self, numbers) -> np.ndarray:
+        """The tile of each output vertex, in :meth:`vertex_blocks`' order: ``numbers[k]`` for
+        the ``k``-th piece's (a welded vertex: its group's first), -1 for the copies."""
+        seam, used = self.seam, self.used
+        counts = [int(used[seam.offsets[k]:seam.offsets[k + 1]].sum())
+                  for k in range(len(seam.rests))]
+        n = int(seam.offsets[-1])
+        return np.concatenate([np.repeat(np.asarray(numbers, np.int32), counts),
+                               np.full(int(used[n:].sum()), -1, np.int32)])
 
     def face_blocks(self):
         """The output's faces (int64, over the output's vertices), a tile's at a time, then
@@ -774,7 +867,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
             vertices, faces, band = result
             path = os.path.join(folder, f"tile{number}{side}.npz")
             try:
-                return split_tile(vertices, faces, tiles[number], spacing, path), band
+                return (split_tile(vertices, faces, tiles[number], spacing, path, number),
+                        band)
             except OSError as error:
                 raise InputError(f"could not write a tile's mesh to the temporary folder "
                                  f"{folder}: {error}; free some disk space there or set TMPDIR "
@@ -814,7 +908,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         progress(0.95, f"stitching {len(tiles)} tiles")
         pieces = [piece for piece, _ in results]
         del results  # the stitcher frees each tile's seam once joined
-        mesh, stitched = stitched_mesh(pieces, tiles, spacing, meshing.min_component_faces)
+        mesh, stitched = stitched_in_blocks(pieces, tiles, spacing,
+                                            meshing.min_component_faces, folder)
         output = (consume(mesh, sub_progress(progress, 0.97, 1.0)) if consume is not None
                   else mesh.arrays())
         del mesh

@@ -108,14 +108,15 @@ def test_pieces_counted_block_by_block_match_the_whole_mesh(kernels, monkeypatch
 
 def test_the_tile_by_tile_write_never_holds_the_whole_mesh(tmp_path, monkeypatch):
     """numpy's allocations (tracemalloc) while the tiles are written: under half the mesh's
-    arrays, which gathering the same stitched mesh into memory allocates."""
+    arrays, which gathering the same stitched mesh into memory allocates. (The writer holds one
+    block of tiles at a time: small tiles, so that a block is a small share of the mesh.)"""
     import tracemalloc
 
     import engine.reconstruct_to_file as to_file
 
     points = hemisphere_cloud(30_000, seed=4)
     cloud = PointCloud(points, colors=np.random.default_rng(4).random((len(points), 3)))
-    settings = dict(SETTINGS, resolution=128, tile_cells=48, udf_source="nearest")
+    settings = dict(SETTINGS, resolution=128, tile_cells=24, udf_source="nearest")
     PieceSizes(3).add(np.array([[0, 1, 2]]))  # the compiled kernels loaded before measuring
     real = to_file._write_stitched
     peaks = {}

@@ -309,14 +309,14 @@ def test_the_turn_votes_gathered_tile_by_tile_are_those_of_all_seams_at_once(mon
     from engine import tiles as tiling
 
     captured = []
-    stitched_mesh = tiling.stitched_mesh
+    stitched_in_blocks = tiling.stitched_in_blocks
 
-    def capture(pieces, tile_list, spacing, min_component_faces=0):
+    def capture(pieces, tile_list, spacing, min_component_faces=0, folder=None):
         captured.append((tiling._split_all(list(pieces), tile_list, spacing), tile_list,
                          spacing))
-        return stitched_mesh(pieces, tile_list, spacing, min_component_faces)
+        return stitched_in_blocks(pieces, tile_list, spacing, min_component_faces, folder)
 
-    monkeypatch.setattr(tiling, "stitched_mesh", capture)
+    monkeypatch.setattr(tiling, "stitched_in_blocks", capture)
     reconstruct(hemisphere_cloud(8_000, seed=3),
                 dict(detail="resolution", resolution=80, tile_cells=24, workers=1))
     pieces, tile_list, spacing = captured[-1]
