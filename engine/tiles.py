@@ -404,15 +404,19 @@ def stitched_in_blocks(pieces, tiles, spacing: float, min_component_faces: int =
     once: the tiles of each block (:func:`plan_blocks`) stitched together, their seam within
     :data:`SEAM_CELLS` of the block's border left as it is; each block's mesh split again
     against the block's box (its rest written to ``folder``, when given); then the blocks
-    stitched as tiles, each seam vertex welding only to another tile's. ``pieces`` (as for
-    :func:`stitched_mesh`) is emptied as it is read.
+    stitched as tiles, each seam vertex welding only to another tile's. Tiles that make one
+    block are stitched in one round. ``pieces`` (as for :func:`stitched_mesh`) is emptied as it
+    is read.
 
     Returns ``(stitched, stats)`` as :func:`stitched_mesh`, the stats of both rounds summed.
     """
+    plan = plan_blocks(tiles)
+    if len(plan) == 1:  # one block: one round
+        return stitched_mesh(pieces, tiles, spacing, min_component_faces)
     given = _split_all(pieces, tiles, spacing)
     pieces.clear()
     blocks, boxes, totals = [], [], {}
-    for number, (box, members) in enumerate(plan_blocks(tiles)):
+    for number, (box, members) in enumerate(plan):
         if len(members) == 1:
             blocks.append(given[members[0]])
         else:
