@@ -4,10 +4,10 @@
         [--tile-cells 64 128] [--workers 2]
 
 For each tile size: reconstructs the cloud in tiles, keeps the tiles' pieces as the stitcher
-received them (each tile's seam in memory, the rest in a file: ``engine.tiles.TilePiece``), then
+received them (each tile in a file, its seam's rim in memory: ``engine.tiles.TilePiece``), then
 stitches them again under tracemalloc and prints the faces, the seam's share of them (the faces
 stitching may change, with the faces around them), the seconds, and the peak of numpy's
-allocations above the seams it is handed, in MB and per face: choosing the tiles to turn
+allocations above the rims it is handed, in MB and per face: choosing the tiles to turn
 (``engine.tiles.tiles_to_turn``), gathered into one mesh in memory (``engine.tiles.stitch``, as
 ``reconstruct()`` returns it, the output included), and read block by block as a file writer
 reads it (``StitchedMesh.vertex_blocks``/``face_blocks``, as the CLI writes a PLY).
@@ -64,7 +64,7 @@ def main():
                 tiles.stitched_in_blocks = stitched_in_blocks
             pieces, tile_list, spacing = captured[-1]
             faces = sum(int(piece.piece_faces.sum()) for piece in pieces)
-            seam = len(tiles._seam(pieces, spacing).faces)
+            seam = len(tiles._seam([piece.held() for piece in pieces], spacing).faces)
             tracemalloc.start()
             base = tracemalloc.get_traced_memory()[0]
             tiles.tiles_to_turn(list(pieces), tile_list, spacing)

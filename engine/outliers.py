@@ -83,6 +83,9 @@ _CHUNK = 20_000
 """Points per neighbour query, so memory stays bounded for clouds of millions of points; also
 how often progress is reported and a cancel checked (about half a second a chunk on two cores)."""
 
+SLAB_POINTS = 1_000_000
+"""Most candidates a neighbour search puts in one k-d tree: larger clouds are searched slab by
+slab (:func:`_nearest_blocks`), so that this stage's memory follows the slab, not the cloud."""
 _SORT_SHARE = 0.05
 """Share of the stage's progress for sorting the points (finding copies)."""
 
@@ -117,120 +120,190 @@ def find_outliers(points: np.ndarray, ratio: float = DEFAULT_OUTLIER_RATIO,
         return np.zeros(len(points), dtype=bool)
     check_cancel(cancel)
     progress(0.0, "finding outliers: sorting the points")
-    distinct, copy_of = _distinct_rows(points)
+    rows, copy_of = _distinct_rows(points)  # the distinct positions, in sorted order
     check_cancel(cancel)
-    flagged = np.zeros(len(distinct), dtype=bool)
+    flagged = np.zeros(len(rows), dtype=bool)
     for round_ in range(ROUNDS):
-        kept = np.flatnonzero(~flagged)
-        if len(kept) <= NEIGHBOURS + 1:
+        alive = rows[~flagged]
+        if len(alive) <= NEIGHBOURS + 1:
             break
         span = (1.0 - _SORT_SHARE - _SURFACE_SHARE) / ROUNDS
-        isolated = _isolated(distinct[kept] if round_ else distinct, ratio,
+        isolated = _isolated(points, alive, ratio,
                              sub_progress(progress, _SORT_SHARE + round_ * span,
                                           _SORT_SHARE + (round_ + 1) * span), cancel,
                              f"pass {round_ + 1} of at most {ROUNDS}")
+        del alive
         if not isolated.any():
             break
-        flagged[kept[isolated]] = True
+        flagged[~flagged] = isolated
     if flagged.any() and np.count_nonzero(~flagged) >= FLAT_NEIGHBOURS:
-        on_surface = _on_the_surface(distinct, flagged,
-                                     sub_progress(progress, 1.0 - _SURFACE_SHARE, 1.0), cancel)
-        flagged[on_surface] = False
+        flagged[flagged] = ~_on_the_surface(points, rows, flagged,
+                                            sub_progress(progress, 1.0 - _SURFACE_SHARE, 1.0),
+                                            cancel)
     progress(1.0, f"finding outliers: {int(np.count_nonzero(flagged)):,} isolated positions")
-    return flagged[copy_of.reshape(-1)]
+    return flagged[copy_of]
+
+
+def _index_type(count: int):
+    """The smallest integer type that numbers ``count`` items (int32 or int64)."""
+    return np.int32 if count < 2 ** 31 else np.int64
 
 
 def _distinct_rows(points: np.ndarray):
-    """``np.unique(points, axis=0, return_inverse=True)``, the same rows in the same order.
+    """The distinct positions: ``rows``, the index of one point at each, in the order of
+    ``np.unique(points, axis=0)`` (so ``points[rows]`` is its first result), and ``copy_of``,
+    each point's position in ``rows`` (its inverse), without copying the points.
 
     Sorted on x alone first (a fraction of the time of sorting whole rows, which would hold up
     a cancel for seconds on millions of points); only runs of equal x are sorted on y and z.
     """
-    order = np.argsort(points[:, 0], kind="stable")
-    ordered = points[order]
-    tie = ordered[1:, 0] == ordered[:-1, 0]
+    index = _index_type(len(points))
+    order = np.argsort(points[:, 0], kind="stable").astype(index)
+    x = points[order, 0]
+    tie = x[1:] == x[:-1]
+    del x
     if tie.any():
         in_run = np.zeros(len(points), dtype=bool)
         in_run[1:] |= tie
         in_run[:-1] |= tie
-        runs = np.flatnonzero(in_run)  # runs of distinct x, each contiguous, x ascending
+        runs = np.flatnonzero(in_run)  # runs of equal x, each contiguous, x ascending
         members = order[runs]
         order[runs] = members[np.lexsort((points[members, 2], points[members, 1],
                                           points[members, 0]))]
-        ordered = points[order]
     new = np.ones(len(points), dtype=bool)
-    np.any(ordered[1:] != ordered[:-1], axis=1, out=new[1:])
-    copy_of = np.empty(len(points), dtype=np.int64)
-    copy_of[order] = np.cumsum(new) - 1
-    return (ordered if new.all() else ordered[new]), copy_of
+    if tie.any():  # only a tie in x can be a copy
+        for start in range(1, len(points), _CHUNK * 50):
+            at = order[start - 1:start + _CHUNK * 50]
+            np.any(points[at[1:]] != points[at[:-1]], axis=1, out=new[start:start + len(at) - 1])
+    copy_of = np.empty(len(points), dtype=index)
+    copy_of[order] = np.cumsum(new, dtype=index) - 1
+    return (order if new.all() else order[new]), copy_of
 
 
-def _isolated(points: np.ndarray, ratio: float, progress: ProgressFn = no_progress,
-              cancel: Optional[CancelFn] = None, label: str = "") -> np.ndarray:
-    """One pass of the spacing test on distinct points: (M, 3) -> (M,) bool."""
-    from scipy.spatial import cKDTree
+def _isolated(points: np.ndarray, alive: np.ndarray, ratio: float,
+              progress: ProgressFn = no_progress, cancel: Optional[CancelFn] = None,
+              label: str = "") -> np.ndarray:
+    """One pass of the spacing test on the distinct points ``points[alive]`` (``alive``:
+    indices, in sorted order): (len(alive),) bool."""
+    neighbours = min(NEIGHBOURS, len(alive) - 1)
+    steps, done = 2 * len(alive), 0
 
-    tree = cKDTree(points)
-    check_cancel(cancel)
-    neighbours = min(NEIGHBOURS, len(points) - 1)
-    chunks = -(-len(points) // _CHUNK)
-    steps, done = 2 * chunks, 0
-
-    def step():
+    def step(count: int) -> None:
         nonlocal done
-        done += 1
+        done += count
         check_cancel(cancel)
         progress(done / steps, f"finding outliers ({label}): {100.0 * done / steps:.0f} %")
 
-    spacing = np.empty(len(points))
-    for start in range(0, len(points), _CHUNK):
-        block = points[start:start + _CHUNK]
-        distances, _ = tree.query(block, k=neighbours + 1, workers=query_threads())
-        spacing[start:start + len(block)] = distances[:, 1:].mean(axis=1)
-        step()
+    spacing = np.empty(len(alive))
+    for which, distances, _ in _nearest_blocks(points, alive, alive, neighbours + 1, cancel):
+        spacing[which] = distances[:, 1:].mean(axis=1)
+        step(len(which))
     # the context: the nearest points of a sample (the points are distinct and sorted on x)
-    every = max(1, min(CONTEXT_STEP, len(points) // (4 * CONTEXT)))
-    sample_tree = tree if every == 1 else cKDTree(points[::every])
+    every = max(1, min(CONTEXT_STEP, len(alive) // (4 * CONTEXT)))
     sample_spacing = spacing[::every]
     context = min(CONTEXT // every, len(sample_spacing) - 1)
-    isolated = np.empty(len(points), dtype=bool)
-    for start in range(0, len(points), _CHUNK):
-        block = points[start:start + _CHUNK]
-        distance, nearest = sample_tree.query(block, k=context + 1, workers=query_threads())
+    isolated = np.empty(len(alive), dtype=bool)
+    for which, distance, nearest in _nearest_blocks(points, alive[::every], alive,
+                                                    context + 1, cancel):
         itself = distance[:, :1] == 0  # a sampled point is not its own context
         nearest = np.where(itself, nearest[:, 1:], nearest[:, :-1])
         typical = np.median(sample_spacing[nearest], axis=1)
-        isolated[start:start + len(block)] = spacing[start:start + len(block)] > ratio * typical
-        step()
+        isolated[which] = spacing[which] > ratio * typical
+        step(len(which))
     return isolated
 
 
-def _on_the_surface(points: np.ndarray, flagged: np.ndarray, progress: ProgressFn = no_progress,
+def _on_the_surface(points: np.ndarray, rows: np.ndarray, flagged: np.ndarray,
+                    progress: ProgressFn = no_progress,
                     cancel: Optional[CancelFn] = None) -> np.ndarray:
-    """Indices of the flagged points that are surface after all (see the module's text)."""
+    """Of the flagged distinct points (``points[rows[flagged]]``), which are surface after all
+    (see the module's text): (flagged.sum(),) bool."""
+    suspects = rows[flagged]
+    unflagged = rows[~flagged]
+    steps, done = 2 * len(suspects), 0
+
+    def step(count: int) -> None:
+        nonlocal done
+        done += count
+        check_cancel(cancel)
+        progress(done / steps, f"finding outliers (sparing surface points): "
+                               f"{100.0 * done / steps:.0f} %")
+
+    flat = np.empty(len(suspects), dtype=bool)
+    for which, _, around in _nearest_blocks(points, rows, suspects, FLAT_NEIGHBOURS + 1,
+                                            cancel):  # itself included
+        flat[which] = _smallest_share(_covariance_eigen(points[rows[around]])[0]) < FLATNESS
+        step(len(which))
+    on_surface = np.empty(len(suspects), dtype=bool)
+    for which, _, beside in _nearest_blocks(points, unflagged, suspects, FLAT_NEIGHBOURS,
+                                            cancel):
+        group = points[unflagged[beside]]
+        eigenvalues, eigenvectors = _covariance_eigen(group)
+        off = np.abs(np.einsum("ni,ni->n", points[suspects[which]] - group.mean(axis=1),
+                               eigenvectors[:, :, 0]))
+        spread = np.sqrt(eigenvalues[:, 1] + eigenvalues[:, 2])
+        on_surface[which] = off < OFF_PLANE * spread
+        step(len(which))
+    return flat & on_surface
+
+
+def _nearest_blocks(points: np.ndarray, among: np.ndarray, asked: np.ndarray, k: int,
+                    cancel: Optional[CancelFn] = None):
+    """The ``k`` nearest of ``points[among]`` to each of ``points[asked]`` (``among``, ``asked``:
+    indices), as blocks of at most :data:`_CHUNK` asked points: yields ``(which, distances,
+    nearest)``, the blocks' positions in ``asked``, their distances (ascending) and their
+    neighbours' positions in ``among``, every asked point once, in no fixed order.
+
+    Up to :data:`SLAB_POINTS` candidates one k-d tree holds them all. More are cut into slabs
+    of that many along the cloud's longest side, each searched with a tree over its own
+    candidates; an asked point whose k-th distance reaches past the slab's ends (a nearer
+    neighbour might lie beyond) is asked again of a tree over the slab widened on both sides
+    by the largest such distance. So memory follows the slab, not the cloud, and the
+    neighbours are the one tree's (equally distant ones aside).
+    """
     from scipy.spatial import cKDTree
 
-    suspects = np.flatnonzero(flagged)
-    unflagged = points[~flagged]
-    everything = cKDTree(points)
-    check_cancel(cancel)
-    surface = cKDTree(unflagged)
-    check_cancel(cancel)
-    on_surface = np.empty(len(suspects), dtype=bool)
-    for start in range(0, len(suspects), _CHUNK):
-        block = points[suspects[start:start + _CHUNK]]
-        _, around = everything.query(block, k=FLAT_NEIGHBOURS + 1, workers=query_threads())  # itself included
-        flat = _smallest_share(_covariance_eigen(points[around])[0]) < FLATNESS
-        _, beside = surface.query(block, k=FLAT_NEIGHBOURS, workers=query_threads())
-        eigenvalues, eigenvectors = _covariance_eigen(unflagged[beside])
-        centre = unflagged[beside].mean(axis=1)
-        off = np.abs(np.einsum("ni,ni->n", block - centre, eigenvectors[:, :, 0]))
-        spread = np.sqrt(eigenvalues[:, 1] + eigenvalues[:, 2])
-        on_surface[start:start + len(block)] = flat & (off < OFF_PLANE * spread)
-        check_cancel(cancel)
-        done = min(start + _CHUNK, len(suspects)) / len(suspects)
-        progress(done, f"finding outliers (sparing surface points): {100.0 * done:.0f} %")
-    return suspects[on_surface]
+    if len(among) <= SLAB_POINTS:
+        tree = cKDTree(points[among])
+        for start in range(0, len(asked), _CHUNK):
+            which = np.arange(start, min(start + _CHUNK, len(asked)))
+            distances, nearest = tree.query(points[asked[which]], k=k, workers=query_threads())
+            yield which, distances.reshape(len(which), -1), nearest.reshape(len(which), -1)
+        return
+    axis = int(np.argmax(points.max(axis=0) - points.min(axis=0)))
+    order = np.argsort(points[among, axis], kind="stable").astype(_index_type(len(among)))
+    coordinate = points[among[order], axis]  # the candidates' along the axis, ascending
+    asked_at = points[asked, axis]
+    ends = coordinate[0], coordinate[-1]
+    for first in range(0, len(among), SLAB_POINTS):
+        low = coordinate[first] if first else -np.inf
+        high = coordinate[first + SLAB_POINTS] if first + SLAB_POINTS < len(among) else np.inf
+        waiting = np.flatnonzero((asked_at >= low) & (asked_at < high))
+        margin = 0.0
+        while len(waiting):
+            check_cancel(cancel)
+            window = np.sort(order[np.searchsorted(coordinate, low - margin, side="left"):
+                                   np.searchsorted(coordinate, high + margin, side="right")])
+            tree = cKDTree(points[among[window]])
+            reach_low = -np.inf if low - margin <= ends[0] else low - margin
+            reach_high = np.inf if high + margin >= ends[1] else high + margin
+            short = []
+            for start in range(0, len(waiting), _CHUNK):
+                which = waiting[start:start + _CHUNK]
+                at = asked_at[which]
+                distances, nearest = tree.query(points[asked[which]], k=k,
+                                                workers=query_threads())
+                distances = distances.reshape(len(which), -1)
+                nearest = nearest.reshape(len(which), -1)
+                inside = distances[:, -1] <= np.minimum(at - reach_low, reach_high - at)
+                short.append(np.column_stack([which[~inside], distances[~inside, -1]]))
+                if inside.any():
+                    yield which[inside], distances[inside], window[nearest[inside]]
+            del tree, window
+            short = np.concatenate(short)
+            waiting = short[:, 0].astype(np.int64)
+            if len(waiting):  # the margin these points need: their k-th distance at most
+                margin = max(margin, float(short[:, 1].max()) * (1 + 1e-9))
 
 
 def _covariance_eigen(groups: np.ndarray):

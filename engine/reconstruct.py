@@ -144,11 +144,16 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     check_cancel(cancel)
     detail = choose_detail(points, settings)
     frame = detail.frame
-    points_unit = frame.to_unit(points)
-    del points  # the working frame's copy is all that is read from here on
-    # the k-d tree serves the untiled field and the colours; tiles build their own
     tile_cells = tile_size(detail, settings)
-    tree = cKDTree(points_unit) if not tile_cells or colors is not None else None
+    # tiles map their own points to the working frame: no copy of the cloud there is held,
+    # except for the k-d tree that serves the untiled field and the colours
+    points_unit = None
+    if not tile_cells or colors is not None:
+        points_unit = frame.to_unit(points)
+    tree = None if points_unit is None else cKDTree(points_unit)
+    count = len(points)
+    if not tile_cells:
+        del points  # the working frame's copy is all that is read from here on
     timings["frame"] = time.perf_counter() - started - timings["outliers"]
     check_cancel(cancel)
 
@@ -161,8 +166,8 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
                 counts = (stitched.vertex_count, stitched.face_count)
                 return counts + write_tiled(stitched, frame, colors, tree, write_progress)
         output, field_stats, mesh_stats = mesh_in_tiles(
-            points_unit, settings, meshing_settings(settings), tile_cells, udf_source,
-            sub_progress(progress, 0.01, _MESH_END), cancel, consume)
+            points, settings, meshing_settings(settings), tile_cells, udf_source,
+            sub_progress(progress, 0.01, _MESH_END), cancel, consume, frame.to_unit)
         timings["tiles"] = time.perf_counter() - mark
         written = output if consume is not None else None
         mesh = Mesh(*output) if written is None else Mesh(np.zeros((0, 3)), _NO_FACES)
@@ -193,7 +198,7 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     timings["finish"] = time.perf_counter() - mark
     timings["total"] = time.perf_counter() - started
 
-    stats = {"points": int(len(points_unit)), "outliers": outliers,
+    stats = {"points": int(count), "outliers": outliers,
              "voxel_size": detail.voxel_size, "cells": detail.cells,
              "outliers_found": outliers_found, **field_stats,
              "queries": (field_stats["network_queries"] - field_stats["sparse_balls"]

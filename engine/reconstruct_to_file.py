@@ -69,11 +69,9 @@ def _write_stitched(path: str, stitched, frame, colors, tree, progress, cancel):
     piece)``."""
     from .commands.preflight import check_pieces
     from .io import write_ply_in_blocks
-    from .meshing.mesh_ops import PieceSizes
 
-    if stitched.face_count == 0:
-        check_pieces(stitched.vertex_count, 0, 0, 0)
-    sizes = PieceSizes(stitched.vertex_count)
+    pieces = stitched.piece_sizes()
+    check_pieces(stitched.vertex_count, stitched.face_count, *pieces)  # nothing written yet
     total = stitched.vertex_count + stitched.face_count
     done = [0]
 
@@ -90,13 +88,10 @@ def _write_stitched(path: str, stitched, frame, colors, tree, progress, cancel):
 
     def face_blocks():
         for block in stitched.face_blocks():
-            sizes.add(block)
             yield block
             advance(len(block))
-        # the last block is written: refuse specks before the file replaces the target
-        check_pieces(stitched.vertex_count, stitched.face_count, *sizes.result())
 
     channels = 0 if colors is None else np.asarray(colors).reshape(len(colors), -1).shape[1]
     write_ply_in_blocks(path, stitched.vertex_count, stitched.face_count, channels,
                         vertex_blocks(), face_blocks(), cancel)
-    return sizes.result()
+    return pieces

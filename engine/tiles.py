@@ -28,11 +28,12 @@ Tiles are made one after the other in this process, in worker processes or on a 
 (:mod:`.tile_runners`), with the same result.
 
 A worker's memory is bounded by the tile size, not the scene. As each tile's mesh reaches the
-main process it is split (:func:`split_tile`): its seam stays in memory, the rest waits in a
-temporary folder on disk and is read back tile by tile into the output
-(:class:`StitchedMesh`): into memory, or straight into a file
-(:mod:`.reconstruct_to_file`), when the main process holds the seams and one tile, never the
-whole mesh. Time grows with the number of tiles that hold points.
+main process it is split (:func:`split_tile`) and waits in a temporary folder on disk, only its
+seam's rim (the weld candidates, which vote on the turn) held; the seams are read back a block
+of tiles at a time, and the rest tile by tile into the output (:class:`StitchedMesh`): into
+memory, or straight into a file (:mod:`.reconstruct_to_file`), when the main process holds
+the blocks' seams and one tile, never the whole mesh. Time grows with the number of tiles
+that hold points.
 """
 
 import dataclasses
@@ -45,6 +46,7 @@ import numpy as np
 
 from .errors import InputError
 from .progress import CancelFn, ProgressFn, no_progress, sub_progress
+from .tile_plan import CloudTiles, Tile
 
 AUTO_TILE_CELLS = 192
 """With ``tile_cells`` 0, tiles of this many cells per side (a worker's memory follows it)."""
@@ -66,41 +68,6 @@ SEAM_CELLS = 4.0
 ones stitching may change (welds, the rings whose normals vote, ears, holes, bow-ties)."""
 
 
-@dataclass(frozen=True)
-class Tile:
-    """A cube of the grid: ``low <= x < high`` (working frame), numbered ``index`` per axis."""
-
-    index: Tuple[int, int, int]
-    low: np.ndarray
-    high: np.ndarray
-
-
-def plan_tiles(points: np.ndarray, spacing: float, tile_cells: int) -> List[Tile]:
-    """The tiles of ``tile_cells`` cells per side that hold at least one point, in C order.
-
-    The outermost tiles reach to infinity on their outer sides, so every point is in exactly
-    one core.
-    """
-    low = points.min(axis=0)
-    size = tile_cells * spacing
-    counts = np.maximum(np.ceil((points.max(axis=0) - low) / size - 1e-9).astype(np.int64), 1)
-    which = np.minimum(np.floor((points - low) / size).astype(np.int64), counts - 1)
-    used = np.unique(np.ravel_multi_index(which.T, counts))
-    tiles = []
-    for flat in used:
-        index = np.array(np.unravel_index(flat, counts))
-        tile_low = np.where(index == 0, -np.inf, low + index * size)
-        tile_high = np.where(index == counts - 1, np.inf, low + (index + 1) * size)
-        tiles.append(Tile(tuple(int(i) for i in index), tile_low, tile_high))
-    return tiles
-
-
-def tile_points(points: np.ndarray, tile: Tile, reach: float) -> np.ndarray:
-    """Indices of the points within ``reach`` of the tile's core box (per axis)."""
-    inside = np.all((points >= tile.low - reach) & (points < tile.high + reach), axis=1)
-    return np.flatnonzero(inside)
-
-
 def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
     """The faces whose centroid lies in the tile's core, with only the vertices they use."""
     if not len(faces):
@@ -111,48 +78,68 @@ def keep_core(vertices: np.ndarray, faces: np.ndarray, tile: Tile):
     return vertices[used], faces.reshape(-1, 3)
 
 
+SEAM_ARRAYS = ("seam_ids", "seam_points", "seam_tile", "seam_faces", "seam_zone", "seam_piece")
+"""The arrays of a :class:`TilePiece` that stitching reads, held or spilled to its file."""
+
+
 @dataclass
 class TilePiece:
     """One tile's kept faces, split for stitching (:func:`split_tile`).
 
-    Held in memory, what stitching reads: the seam's part of the tile. ``seam_ids``: the
-    tile's vertices on the seam's faces (ascending), ``seam_points`` their positions,
-    ``seam_near`` whether each lies within :data:`SEAM_CELLS` of the core's border;
+    What stitching reads, the seam's part of the tile (held in memory, or spilled to the
+    tile's file until :meth:`held` reads it back: then these are None): ``seam_ids``: the
+    tile's vertices on the seam's faces (ascending), ``seam_points`` their positions;
     ``seam_faces``: the seam's faces, over the positions in ``seam_ids``: the zone faces
     (``seam_zone``: a vertex near the border) and the faces sharing a vertex with them, so that
     every edge of a zone face has all of its faces here; ``seam_piece``: their pieces (the
-    tile's vertex-connected components). Per piece: ``piece_area`` and ``piece_faces``.
-    ``seam_tile``: the tile each seam vertex was made in (its number among all tiles; a block
-    of tiles stitched together keeps its vertices' tiles, -1 for a copy a bow-tie split made):
-    welds join vertices of different tiles only.
+    tile's vertex-connected components). ``seam_tile``: the tile each seam vertex was made in
+    (its number among all tiles; a block of tiles stitched together keeps its vertices' tiles,
+    -1 for a copy a bow-tie split made): welds join vertices of different tiles only.
+
+    Always held: per piece, ``piece_area`` and ``piece_faces``; the seam's *rim*, its open
+    vertices within :data:`SEAM_CELLS` of the core's border (the weld candidates): ``rim``
+    (positions in ``seam_ids``), ``rim_points``, ``rim_tile``, ``rim_piece`` and
+    ``rim_normal`` (the unit normal of the :data:`NORMAL_RINGS` rings of faces around each,
+    which votes on the tile's orientation: :func:`tiles_to_turn` reads the rims alone).
 
     The rest, read only to assemble the output: ``rest`` (:class:`TileRest`).
     """
 
     vertex_count: int
-    seam_ids: np.ndarray
-    seam_points: np.ndarray
-    seam_near: np.ndarray
-    seam_tile: np.ndarray
-    seam_faces: np.ndarray
-    seam_zone: np.ndarray
-    seam_piece: np.ndarray
+    seam_ids: Optional[np.ndarray]
+    seam_points: Optional[np.ndarray]
+    seam_tile: Optional[np.ndarray]
+    seam_faces: Optional[np.ndarray]
+    seam_zone: Optional[np.ndarray]
+    seam_piece: Optional[np.ndarray]
     piece_area: np.ndarray
     piece_faces: np.ndarray
+    rim: np.ndarray
+    rim_points: np.ndarray
+    rim_tile: np.ndarray
+    rim_piece: np.ndarray
+    rim_normal: np.ndarray
     rest: "TileRest"
+
+    def held(self) -> "TilePiece":
+        """This piece with its seam in memory (read back from its file if it was spilled)."""
+        if self.seam_ids is not None:
+            return self
+        return dataclasses.replace(self, **dict(zip(SEAM_ARRAYS, self.rest.read(*SEAM_ARRAYS))))
 
 
 @dataclass
 class TileRest:
     """What of a tile's piece the output reads besides the seam: per piece, its faces away
-    from the seam (``piece_rest``), and the arrays ``vertices``, ``faces`` and ``pieces`` in
-    the ``.npz`` file ``stored`` names, or in ``stored`` (a dict) when split without a file."""
+    from the seam (``piece_rest``), and the arrays ``vertices``, ``faces`` and ``pieces`` (and
+    the seam's, :data:`SEAM_ARRAYS`, when it was spilled) in the ``.npz`` file ``stored``
+    names, or in ``stored`` (a dict) when split without a file."""
 
     piece_rest: np.ndarray
     stored: object
 
     def read(self, *names: str) -> tuple:
-        """The named arrays (``vertices``, ``faces``, ``pieces``)."""
+        """The named arrays (``vertices``, ``faces``, ``pieces``, a spilled seam's)."""
         if isinstance(self.stored, dict):
             return tuple(self.stored[name] for name in names)
         with np.load(self.stored) as data:
@@ -161,10 +148,11 @@ class TileRest:
 
 def split_tile(vertices: np.ndarray, faces: np.ndarray, tile: Tile, spacing: float,
                path: Optional[str] = None, number: int = 0,
-               vertex_tile: Optional[np.ndarray] = None) -> TilePiece:
+               vertex_tile: Optional[np.ndarray] = None, spill: bool = False) -> TilePiece:
     """A tile's kept faces split into its seam (held) and the rest (written to ``path``, an
     ``.npz`` file, when given; else held too). See :class:`TilePiece`. ``number``: the tile's
-    among all tiles; ``vertex_tile``, given, each vertex's tile instead (a block's)."""
+    among all tiles; ``vertex_tile``, given, each vertex's tile instead (a block's);
+    ``spill``: write the seam to ``path`` as well, holding only its rim."""
     from .meshing.mesh_ops import face_normals, vertex_components
 
     v = np.asarray(vertices, np.float64).reshape(-1, 3)
@@ -180,19 +168,39 @@ def split_tile(vertices: np.ndarray, faces: np.ndarray, tile: Tile, spacing: flo
     on_seam = np.zeros(len(v), bool)
     on_seam[f[seam]] = True
     position = np.cumsum(on_seam) - 1  # of each seam vertex in ``seam_ids``
+    held = dict(zip(SEAM_ARRAYS, (
+        np.flatnonzero(on_seam), v[on_seam],
+        (np.full(int(on_seam.sum()), number, np.int32) if vertex_tile is None
+         else np.asarray(vertex_tile, np.int32)[on_seam]),
+        position[f[seam]], zone[seam], label[seam])))
+    rim = _rim(held["seam_points"], held["seam_faces"], close[on_seam], held["seam_tile"],
+               held["seam_piece"])
     rest = {"vertices": v, "faces": f[~seam].astype(np.int32),
             "pieces": label[~seam].astype(np.int32)}
     if path is not None:
-        np.savez(path, **rest)
+        np.savez(path, **rest, **(held if spill else {}))
         rest = path
-    seam_tile = (np.full(int(on_seam.sum()), number, np.int32) if vertex_tile is None
-                 else np.asarray(vertex_tile, np.int32)[on_seam])
-    return TilePiece(len(v), np.flatnonzero(on_seam), v[on_seam], close[on_seam], seam_tile,
-                     position[f[seam]], zone[seam], label[seam], area,
-                     np.bincount(label, minlength=count),
-                     TileRest(np.bincount(label[~seam], minlength=count), rest))
+        if spill:
+            held = dict.fromkeys(held)
+    return TilePiece(len(v), **held, piece_area=area,
+                     piece_faces=np.bincount(label, minlength=count), **rim,
+                     rest=TileRest(np.bincount(label[~seam], minlength=count), rest))
 
 
+def _rim(points, faces, near, tile, face_piece) -> dict:
+    """A seam's rim (:class:`TilePiece`): its open vertices near the border, ascending, with
+    their positions, tiles, pieces and unit normals."""
+    from .meshing.mesh_ops import edge_topology
+
+    rim = np.zeros(0, np.int64)
+    if len(faces):
+        topo = edge_topology(faces)
+        rim = np.unique(topo.edges[topo.counts == 1])
+        rim = rim[near[rim]]
+    normal = (_vertex_normals(points, faces)[rim] if len(rim) else np.zeros((0, 3)))
+    return {"rim": rim, "rim_points": points[rim], "rim_tile": tile[rim],
+            "rim_piece": _vertex_pieces(len(points), faces, face_piece)[rim],
+            "rim_normal": normal}
 @dataclass
 class _Seam:
     """The seams of all the tiles' pieces (:class:`TilePiece`), joined; ``rests``: the rest of
@@ -226,11 +234,13 @@ SEAM_BLOCK = 1 << 20
 """Most seam faces :meth:`StitchedMesh.face_blocks` yields at once."""
 
 
-def _split_all(pieces, tiles, spacing: float) -> list:
-    """The pieces as :class:`TilePiece` (those given as ``(vertices, faces)`` split, held)."""
-    return [piece if isinstance(piece, TilePiece)
-            else split_tile(*piece, tile, spacing, number=number)
-            for number, (piece, tile) in enumerate(zip(pieces, tiles))]
+def _split_all(pieces, tiles, spacing: float, hold: bool = False) -> list:
+    """The pieces as :class:`TilePiece` (those given as ``(vertices, faces)`` split, held);
+    ``hold``: with every seam in memory."""
+    split = [piece if isinstance(piece, TilePiece)
+             else split_tile(*piece, tile, spacing, number=number)
+             for number, (piece, tile) in enumerate(zip(pieces, tiles))]
+    return [piece.held() for piece in split] if hold else split
 
 
 def _seam(pieces: list, spacing: float, frozen: Optional[Tile] = None) -> _Seam:
@@ -238,8 +248,6 @@ def _seam(pieces: list, spacing: float, frozen: Optional[Tile] = None) -> _Seam:
     their open vertices to weld. With ``frozen`` (a block of tiles' box), the seam within
     :data:`SEAM_CELLS` of its border is left as it is: no weld there, no face touching it in
     the zone, for the blocks' own stitching (:func:`stitched_in_blocks`)."""
-    from .meshing.mesh_ops import edge_topology
-
     offsets = np.cumsum([0] + [piece.vertex_count for piece in pieces])
     seam_first = np.cumsum([0] + [len(piece.seam_ids) for piece in pieces])
     piece_first = np.cumsum([0] + [len(piece.piece_area) for piece in pieces])[:-1]
@@ -249,24 +257,21 @@ def _seam(pieces: list, spacing: float, frozen: Optional[Tile] = None) -> _Seam:
     faces = np.concatenate([piece.seam_faces + seam_first[t] for t, piece in enumerate(pieces)]
                            + [np.zeros((0, 3), np.int64)])
     points = np.concatenate([piece.seam_points for piece in pieces] + [np.zeros((0, 3))])
-    near = np.concatenate([piece.seam_near for piece in pieces] + [np.zeros(0, bool)])
     zone = np.concatenate([piece.seam_zone for piece in pieces] + [np.zeros(0, bool)])
     held = None
     if frozen is not None:
         margin = np.minimum(points - frozen.low, frozen.high - points).min(axis=1)
         held = margin < SEAM_CELLS * spacing
-        near &= ~held
         zone &= ~held[faces].any(axis=1)
         del margin
-    a = b = empty
-    if len(faces):
-        topo = edge_topology(faces)
-        rim = np.unique(topo.edges[topo.counts == 1])
-        rim = rim[near[rim]]  # the zone's open edges are open in the whole mesh too
-        tile_of = np.concatenate([piece.seam_tile for piece in pieces]
-                                 + [np.zeros(0, np.int32)])[rim]
-        i, j = _pairs_across(points[rim], tile_of, spacing)
-        a, b = rim[i], rim[j]
+    # the zone's open edges are open in the whole mesh too: the weld candidates are the rims
+    rim = np.concatenate([piece.rim + seam_first[t] for t, piece in enumerate(pieces)] + [empty])
+    tile_of = np.concatenate([piece.rim_tile for piece in pieces] + [np.zeros(0, np.int32)])
+    if held is not None:
+        tile_of = tile_of[~held[rim]]
+        rim = rim[~held[rim]]
+    i, j = _pairs_across(points[rim], tile_of, spacing)
+    a, b = rim[i], rim[j]
     return _Seam([piece.rest for piece in pieces], offsets, ids, points, faces, zone,
                  np.concatenate([piece.seam_piece + piece_first[t]
                                  for t, piece in enumerate(pieces)] + [empty]),
@@ -312,7 +317,7 @@ def stitched_mesh(pieces, tiles, spacing: float, min_component_faces: int = 0,
     from .meshing.layers import close_pinholes
     from .meshing.mesh_ops import face_normals, split_nonmanifold_vertices, vertex_components
 
-    given = _split_all(pieces, tiles, spacing)
+    given = _split_all(pieces, tiles, spacing, hold=True)
     pieces.clear()
     seam = _seam(given, spacing, frozen)
     del given
@@ -427,7 +432,7 @@ def stitched_in_blocks(pieces, tiles, spacing: float, min_component_faces: int =
             del stitched
             path = None if folder is None else os.path.join(folder, f"block{number}.npz")
             blocks.append(split_tile(vertices, faces, box, spacing, path,
-                                     vertex_tile=vertex_tile))
+                                     vertex_tile=vertex_tile, spill=path is not None))
             del vertices, faces, vertex_tile
             for key, value in stats.items():
                 totals[key] = totals.get(key, 0) + value
@@ -493,23 +498,34 @@ class StitchedMesh:
     ``vertex_count`` and ``face_count`` are known at once; :meth:`vertex_blocks` and
     :meth:`face_blocks` yield the output in order, a tile at a time, each tile's rest read from
     where :func:`split_tile` put it, so a writer holds the seam and one tile, never the whole
-    mesh. :meth:`arrays` gathers it into memory. Read it while the tiles' files exist.
+    mesh: what is kept across the tiles follows the seam (each seam vertex's number in the
+    output) and the number of tiles (each tile's count of used vertices). :meth:`arrays`
+    gathers it into memory. Read it while the tiles' files exist.
     """
 
     def __init__(self, seam: _Seam, local: np.ndarray, faces: np.ndarray, flip: np.ndarray,
                  dropped: np.ndarray):
         self.seam, self.local, self.flip, self.dropped = seam, local, flip, dropped
-        n, s = int(seam.offsets[-1]), len(seam.ids)
-        lookup = np.concatenate([seam.ids, n + np.arange(len(local) - s)])
-        self.seam_faces = lookup[faces]  # numbered across the tiles, copies after them
-        del lookup
-        self.used = np.zeros(n + len(local) - s, bool)
-        self.face_count = len(self.seam_faces)
-        for number, rest, label in self._rests():
-            self.used[rest.reshape(-1) + seam.offsets[number]] = True
+        s = len(seam.ids)
+        self._on_seam = np.zeros(len(local), bool)  # local vertices the seam's faces use
+        self._on_seam[faces.reshape(-1)] = True
+        output = np.full(len(local), -1, np.int64)  # each local vertex's number in the output
+        self.counts = []  # per tile, its vertices in the output
+        self.face_count = len(faces)
+        first = 0
+        for number, rest, _ in self._rests():
+            used = self._used(number, rest)
+            where = self._seam_range(number)
+            on = np.flatnonzero(self._on_seam[where]) + where.start
+            output[on] = first + (np.cumsum(used) - 1)[seam.ids[on] - seam.offsets[number]]
+            self.counts.append(int(used.sum()))
             self.face_count += len(rest)
-        self.used[self.seam_faces.reshape(-1)] = True
-        self.vertex_count = int(self.used.sum())
+            first += self.counts[-1]
+        copies = np.flatnonzero(self._on_seam[s:]) + s
+        output[copies] = first + np.arange(len(copies))
+        self.firsts = np.cumsum([0] + self.counts)
+        self.vertex_count = int(first + len(copies))
+        self._faces, self._output = faces, output
 
     def _rests(self):
         """Per tile: its number, and its kept rest faces (tile numbering) and their pieces."""
@@ -518,46 +534,98 @@ class StitchedMesh:
             kept = ~self.dropped[first + label]
             yield number, rest[kept], label[kept] + first
 
+    def _seam_range(self, number: int) -> slice:
+        """The local vertices that are tile ``number``'s seam vertices."""
+        return slice(*np.searchsorted(self.seam.ids, self.seam.offsets[number:number + 2]))
+
+    def _used(self, number: int, rest: np.ndarray) -> np.ndarray:
+        """Which of tile ``number``'s vertices the output has: those of its kept ``rest`` faces
+        and of the seam's faces."""
+        seam = self.seam
+        used = np.zeros(seam.offsets[number + 1] - seam.offsets[number], bool)
+        used[rest.reshape(-1)] = True
+        where = self._seam_range(number)
+        used[seam.ids[where][self._on_seam[where]] - seam.offsets[number]] = True
+        return used
+
     def vertex_blocks(self):
         """The output's vertices (float64, working frame), a tile's at a time."""
-        seam, used, local = self.seam, self.used, self.local
-        for number, rest in enumerate(seam.rests):
-            vertices, = rest.read("vertices")
-            low, high = seam.offsets[number], seam.offsets[number + 1]
-            used_here = used[low:high]
-            block = vertices[used_here]
+        seam, local = self.seam, self.local
+        for number, rest, _ in self._rests():
+            used = self._used(number, rest)
+            del rest
+            vertices, = seam.rests[number].read("vertices")
+            block = vertices[used]
             del vertices
-            where = slice(*np.searchsorted(seam.ids, [low, high]))  # the tile's seam vertices
-            moved = seam.ids[where] - low
-            still = used_here[moved]
-            block[(np.cumsum(used_here) - 1)[moved[still]]] = local[where][still]
+            where = self._seam_range(number)
+            on = np.flatnonzero(self._on_seam[where]) + where.start  # moved by the stitching
+            block[self._output[on] - self.firsts[number]] = local[on]
             yield block
-        n, s = int(seam.offsets[-1]), len(seam.ids)
-        yield local[s:][used[n:]]
+        yield local[len(seam.ids):][self._on_seam[len(seam.ids):]]
 
     def vertex_tiles(self, numbers) -> np.ndarray:
         """The tile of each output vertex, in :meth:`vertex_blocks`' order: ``numbers[k]`` for
         the ``k``-th piece's (a welded vertex: its group's first), -1 for the copies."""
-        seam, used = self.seam, self.used
-        counts = [int(used[seam.offsets[k]:seam.offsets[k + 1]].sum())
-                  for k in range(len(seam.rests))]
-        n = int(seam.offsets[-1])
-        return np.concatenate([np.repeat(np.asarray(numbers, np.int32), counts),
-                               np.full(int(used[n:].sum()), -1, np.int32)])
+        return np.concatenate([np.repeat(np.asarray(numbers, np.int32), self.counts),
+                               np.full(self.vertex_count - int(self.firsts[-1]), -1, np.int32)])
 
     def face_blocks(self):
         """The output's faces (int64, over the output's vertices), a tile's at a time, then
         the seam's."""
-        big = len(self.used) >= 2 ** 31
-        remap = np.cumsum(self.used, dtype=np.int64 if big else np.int32)
-        remap -= 1
         for number, rest, label in self._rests():
-            block = remap[rest + self.seam.offsets[number]].astype(np.int64)
+            remap = np.cumsum(self._used(number, rest), dtype=np.int64)
+            remap += self.firsts[number] - 1
+            block = remap[rest]
             turn = np.flatnonzero(self.flip[label])
             block[turn] = block[turn][:, ::-1]
             yield block
-        for start in range(0, len(self.seam_faces), SEAM_BLOCK):  # the seam's may be many
-            yield remap[self.seam_faces[start:start + SEAM_BLOCK]].astype(np.int64)
+        for start in range(0, len(self._faces), SEAM_BLOCK):  # the seam's may be many
+            yield self._output[self._faces[start:start + SEAM_BLOCK]]
+
+    def piece_sizes(self):
+        """``(pieces, largest)``: the number of connected pieces (faces sharing a vertex) and
+        the faces of the largest, (0, 0) without faces. Counted tile by tile: each tile's rest
+        faces in their own pieces, joined through the seam's vertices they share with the
+        seam's faces (no rest face has a vertex a weld moved), so what is held follows the
+        seam and the pieces, not the mesh."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        from .meshing.mesh_ops import vertex_components
+
+        if self.face_count == 0:
+            return 0, 0
+        seam = self.seam
+        # the seam's own pieces, then those joined by the tiles' rest pieces they touch
+        count, label = (vertex_components(len(self.local), self._faces) if len(self._faces)
+                        else (0, np.zeros(0, np.int64)))
+        sizes = [np.bincount(label, minlength=count)]
+        on_piece = np.full(len(self.local), -1, np.int64)  # each seam vertex's seam piece
+        for corner in range(3):
+            on_piece[self._faces[:, corner]] = label
+        del label
+        links = []
+        for number, rest, _ in self._rests():
+            if not len(rest):
+                continue
+            size = seam.offsets[number + 1] - seam.offsets[number]
+            pieces, label = vertex_components(size, rest)  # per face
+            rest_piece = np.full(size, -1, np.int64)
+            for corner in range(3):
+                rest_piece[rest[:, corner]] = label
+            where = self._seam_range(number)
+            both = np.column_stack([on_piece[where],
+                                    rest_piece[seam.ids[where] - seam.offsets[number]]])
+            both = both[(both >= 0).all(axis=1)]
+            links.append(both + [0, count])
+            sizes.append(np.bincount(label, minlength=pieces))
+            count += pieces
+        links = np.concatenate(links + [np.zeros((0, 2), np.int64)])
+        graph = coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(count, count))
+        _, joined = connected_components(graph, directed=False)
+        faces = np.bincount(joined, weights=np.concatenate(sizes))
+        faces = faces[faces > 0]
+        return (int(len(faces)), int(faces.max())) if len(faces) else (0, 0)
 
     def arrays(self):
         """``(vertices (n, 3) float64, faces (m, 3) int64)``: the whole mesh in memory."""
@@ -617,26 +685,25 @@ def _around(index: Tuple[int, int, int]):
 def _tile_votes(pieces: list, piece_first: np.ndarray, window: list, number: int,
                 spacing: float):
     """The votes of the weld pairs between tile ``number`` and the higher-numbered tiles of
-    ``window`` (tile numbers, ascending, ``number`` among them): the two pieces of each pair
-    (numbered across all tiles) and whether their normals agree (:func:`_pair_agreement`)."""
+    ``window`` (tile numbers, ascending, ``number`` among them), from their rims
+    (:class:`TilePiece`): the two pieces of each pair (numbered across all tiles) and whether
+    their normals agree (their dot product)."""
     empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
     if len(window) < 2:
         return empty
-    seam = _seam([pieces[member] for member in window], spacing)
-    if not len(seam.a):
+    rims = [pieces[member] for member in window]
+    points = np.concatenate([rim.rim_points for rim in rims])
+    tile_of = np.concatenate([rim.rim_tile for rim in rims])
+    i, j = _pairs_across(points, tile_of, spacing)
+    ti, tj = tile_of[i], tile_of[j]
+    mine = ((ti == number) & (tj > number)) | ((tj == number) & (ti > number))
+    i, j = i[mine], j[mine]
+    if not len(i):
         return empty
-    member = np.searchsorted(seam.offsets, seam.ids, side="right") - 1  # per seam vertex
-    tile_of = np.asarray(window)[member]
-    ta, tb = tile_of[seam.a], tile_of[seam.b]
-    mine = ((ta == number) & (tb > number)) | ((tb == number) & (ta > number))
-    a, b = seam.a[mine], seam.b[mine]
-    if not len(a):
-        return empty
-    agree = _pair_agreement(seam.points, seam.faces, a, b)
-    piece = _vertex_pieces(len(seam.points), seam.faces, seam.face_piece)
-    # the window's pieces are numbered member after member: renumber them across all tiles
-    first = np.asarray([piece_first[tile] for tile in window]) - seam.piece_first
-    return (piece[a] + first[member[a]], piece[b] + first[member[b]], agree)
+    normal = np.concatenate([rim.rim_normal for rim in rims])
+    piece = np.concatenate([rim.rim_piece + piece_first[member]
+                            for rim, member in zip(rims, window)])
+    return piece[i], piece[j], np.einsum("ij,ij->i", normal[i], normal[j])
 
 
 def _pairs_across(points: np.ndarray, tile_of: np.ndarray, spacing: float):
@@ -723,8 +790,15 @@ def _vertex_pieces(count: int, faces: np.ndarray, face_piece: np.ndarray) -> np.
 
 
 def _pair_agreement(vertices, faces, a, b) -> np.ndarray:
-    """Per pair ``(a, b)`` of vertices, the dot product of their normals: the area-weighted
-    normals of the few rings of faces around each (the faces at a tile's cut are slivers)."""
+    """Per pair ``(a, b)`` of vertices, the dot product of their normals
+    (:func:`_vertex_normals`)."""
+    normal = _vertex_normals(vertices, faces)
+    return np.einsum("ij,ij->i", normal[a], normal[b])
+
+
+def _vertex_normals(vertices, faces) -> np.ndarray:
+    """Each vertex's unit normal: the area-weighted normal of the :data:`NORMAL_RINGS` rings of
+    faces around it (the faces at a tile's cut are slivers)."""
     from .meshing.mesh_ops import face_normals, incidence_matrix
 
     normals, areas = face_normals(vertices, faces)
@@ -733,7 +807,7 @@ def _pair_agreement(vertices, faces, a, b) -> np.ndarray:
     for _ in range(NORMAL_RINGS):
         vertex_normal = incidence @ (incidence.T @ vertex_normal)
     vertex_normal /= np.maximum(np.linalg.norm(vertex_normal, axis=1), 1e-300)[:, None]
-    return np.einsum("ij,ij->i", vertex_normal[a], vertex_normal[b])
+    return vertex_normal
 
 
 def _flips_from_votes(pa, pb, agree, count: int) -> np.ndarray:
@@ -827,11 +901,13 @@ def mesh_tile(points: np.ndarray, tile: Tile, anchor: np.ndarray, settings, mesh
 
 def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                   udf_source: str = "network", progress: Optional[ProgressFn] = None,
-                  cancel: Optional[CancelFn] = None, consume=None):
+                  cancel: Optional[CancelFn] = None, consume=None, to_unit=None):
     """One mesh of a cloud (working frame) made tile by tile (see the module docstring).
 
     ``consume(stitched, progress)``, given, reads the :class:`StitchedMesh` (to write it to a
     file block by block, say) while the tiles' files exist; its return value is the output.
+    ``to_unit``, given, maps ``points`` (then in the input's units) to the working frame, a
+    tile's points at a time (:class:`.tile_plan.CloudTiles`).
 
     Returns
     -------
@@ -849,30 +925,28 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
 
     progress = progress or no_progress
     spacing = 1.0 / settings.resolution
-    tiles = plan_tiles(points, spacing, tile_cells)
+    cloud = CloudTiles(points, spacing, tile_cells, tile_reach(settings, spacing), to_unit)
+    tiles = cloud.tiles
     # the tiles' nodes are the nodes one grid over the whole cloud would have, so tiling
     # changes where the field is read nowhere (anchored on the lowest point instead, a floor
     # and the walls a whole number of cells from it lie on node planes, where the cover's
     # iso-value of one cell meets the next nodes and marching cubes cuts slivers)
-    anchor = grid_layout(points, settings.resolution, 0.0)[1]
-    reach = tile_reach(settings, spacing)
+    anchor = grid_layout(np.stack([cloud.low, cloud.high]), settings.resolution, 0.0)[1]
 
     def job(number: int) -> tuple:
-        tile = tiles[number]
-        return (points[tile_points(points, tile, reach)], tile, anchor, settings, meshing,
-                udf_source)
+        return (cloud.points_of(number), tiles[number], anchor, settings, meshing, udf_source)
 
     # a tile's work follows the points it reads: workers take the largest tiles first
-    costs = [len(tile_points(points, tile, reach)) for tile in tiles]
+    costs = [len(cloud.points_of(number)) for number in range(len(tiles))]
     with tempfile.TemporaryDirectory(prefix="udf-tiles-") as folder:
 
         def keep(number: int, result: tuple, side: str = "") -> tuple:
-            """A tile's mesh: its seam here, the rest on disk; and its numbers."""
+            """A tile's mesh on disk, its rim here (:class:`TilePiece`); and its numbers."""
             vertices, faces, band = result
             path = os.path.join(folder, f"tile{number}{side}.npz")
             try:
-                return (split_tile(vertices, faces, tiles[number], spacing, path, number),
-                        band)
+                return (split_tile(vertices, faces, tiles[number], spacing, path, number,
+                                   spill=True), band)
             except OSError as error:
                 raise InputError(f"could not write a tile's mesh to the temporary folder "
                                  f"{folder}: {error}; free some disk space there or set TMPDIR "

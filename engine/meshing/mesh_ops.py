@@ -151,43 +151,6 @@ def component_count(n: int, faces: np.ndarray) -> int:
     return int(vertex_components(n, faces)[0])
 
 
-class PieceSizes:
-    """The connected pieces (faces sharing a vertex) of a mesh over ``n`` vertices whose faces
-    come block by block (:meth:`add`): how many, and the faces of the largest (:meth:`result`),
-    without holding the faces (compiled: a union-find of 16 bytes per vertex, half that for
-    fewer than 2**31 vertices; numpy: the faces kept and labelled at the end)."""
-
-    def __init__(self, n: int):
-        self.n = n
-        self.compiled = load_kernels("meshing.mesh_ops_kernels")
-        if self.compiled is not None:
-            index = np.int32 if n < 2 ** 31 else np.int64
-            self.parent = np.arange(n, dtype=index)
-            self.faces_at = np.zeros(n, index)
-        else:
-            self.blocks = []
-
-    def add(self, faces: np.ndarray) -> None:
-        """Count ``faces`` (k, 3) in, numbered over the whole mesh's vertices."""
-        faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-        if self.compiled is not None:
-            self.compiled.add_faces(self.parent, self.faces_at, faces)
-        else:
-            self.blocks.append(faces)
-
-    def result(self):
-        """``(pieces, largest)``: the number of pieces and the faces of the largest (0, 0
-        without faces)."""
-        if self.compiled is not None:
-            count, largest = self.compiled.piece_sizes(self.parent, self.faces_at)
-            return int(count), int(largest)
-        faces = np.concatenate(self.blocks + [np.zeros((0, 3), np.int64)])
-        if not len(faces):
-            return 0, 0
-        count, labels = vertex_components(self.n, faces)
-        return int(count), int(np.bincount(labels).max())
-
-
 def boundary_loops(faces: np.ndarray, topo: EdgeTopology = None) -> int:
     """Number of boundary loops: connected pieces of the edges used by exactly one face."""
     from scipy import sparse

@@ -7,9 +7,7 @@ bucket, a vertex's few edges, is ordered by the larger one. :func:`facing_candid
 depth and lateral offset), in one pass over the neighbour lists instead of a dozen array passes
 over all of them. :func:`vertex_components` gives what :func:`.mesh_ops.vertex_components`
 gives, by a union-find over the vertices instead of a sparse graph of the faces' edges, and
-:func:`pair_components` the corners' fans of :func:`.mesh_ops.vertex_fans` the same way;
-:func:`add_faces` and :func:`piece_sizes` the pieces of a mesh read block by block
-(:class:`.mesh_ops.PieceSizes`).
+:func:`pair_components` the corners' fans of :func:`.mesh_ops.vertex_fans` the same way.
 """
 
 import numba
@@ -147,35 +145,6 @@ def component_count(n, faces):
     for i in range(faces.shape[0]):
         root[_root(parent, faces[i, 0])] = True
     return int(root.sum())
-
-
-@numba.njit(nogil=True, cache=True)
-def add_faces(parent, faces_at, faces):
-    """Join ``faces``' vertices in the union-find ``parent`` (a root's lowest vertex wins) and
-    count each face at its piece's root in ``faces_at`` (a joined root's count moves on)."""
-    for i in range(faces.shape[0]):
-        a = _root(parent, faces[i, 0])
-        for j in range(1, 3):
-            b = _root(parent, faces[i, j])
-            if b < a:
-                a, b = b, a
-            if a != b:
-                parent[b] = a
-                faces_at[a] += faces_at[b]
-                faces_at[b] = 0
-        faces_at[a] += 1
-
-
-@numba.njit(nogil=True, cache=True)
-def piece_sizes(parent, faces_at):
-    """How many pieces (roots with faces) and the faces of the largest."""
-    count = 0
-    largest = 0
-    for v in range(parent.shape[0]):
-        if parent[v] == v and faces_at[v] > 0:
-            count += 1
-            largest = max(largest, faces_at[v])
-    return count, largest
 
 
 @numba.njit(nogil=True, cache=True)

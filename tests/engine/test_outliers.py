@@ -207,3 +207,28 @@ def test_reconstruct_follows_and_cancels_the_outlier_stage():
     assert any(message.startswith("finding outliers (pass 1") for message in messages)
     assert not any("outliers" not in message and "preparing" not in message
                    for message in messages)  # stopped inside the outlier stage
+
+
+def test_a_cloud_searched_in_slabs_gets_the_same_answer_as_in_one_tree(monkeypatch):
+    """Beyond SLAB_POINTS candidates the neighbour searches run slab by slab along the longest
+    side (memory follows the slab); the points near a slab's ends are asked again with a wider
+    margin, so every pass flags the same points as one tree over the whole cloud."""
+    import engine.outliers
+
+    points, stray = plane_with_strays(surface=30_000, strays=1_500, seed=12)
+    points[:, 1] *= 3.0  # the longest side is y: slabs across it
+    whole = find_outliers(points)
+    assert stray[whole].mean() > 0.9 and whole[stray].mean() > 0.9
+    searched = []
+    blocks = engine.outliers._nearest_blocks
+
+    def counted(points, among, asked, k, cancel=None):
+        for which, distances, nearest in blocks(points, among, asked, k, cancel):
+            searched.append(which)
+            yield which, distances, nearest
+
+    monkeypatch.setattr(engine.outliers, "SLAB_POINTS", 2_000)
+    monkeypatch.setattr(engine.outliers, "_nearest_blocks", counted)
+    assert np.array_equal(find_outliers(points), whole)
+    # each search answers every asked point exactly once, however many slabs it took
+    assert len(searched) > 4 * 16

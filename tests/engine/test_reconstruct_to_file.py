@@ -10,7 +10,7 @@ import engine.tiles
 from engine.errors import Cancelled, InputError
 from engine.geometry import Mesh, PointCloud
 from engine.io import read_mesh, write_mesh, write_ply_in_blocks
-from engine.meshing.mesh_ops import PieceSizes, vertex_components
+from engine.meshing.mesh_ops import vertex_components
 from engine.reconstruct import reconstruct
 from engine.reconstruct_to_file import reconstruct_to_file
 
@@ -88,22 +88,33 @@ def test_a_block_writer_that_refuses_at_the_end_writes_nothing(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply"]
 
 
-@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
-def test_pieces_counted_block_by_block_match_the_whole_mesh(kernels, monkeypatch):
-    if kernels == "numpy":
-        monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+def test_pieces_counted_tile_by_tile_match_the_whole_mesh(monkeypatch):
+    """The writer counts a tiled mesh's pieces without holding it (each tile's rest faces in
+    their own pieces, joined through the seam): the count and the largest piece's faces of the
+    whole mesh gathered in memory."""
+    from engine import tiles as tiling
+
+    made = []
+    stitched_in_blocks = tiling.stitched_in_blocks
+
+    def counted(*args, **kwargs):
+        stitched, stats = stitched_in_blocks(*args, **kwargs)
+        vertices, faces = stitched.arrays()
+        count, labels = vertex_components(len(vertices), faces)
+        largest = int(np.bincount(labels).max())
+        made.append((stitched.piece_sizes(), (count, largest)))
+        return stitched, stats
+
     rng = np.random.default_rng(5)
-    n = 6_000
-    faces = rng.integers(0, n, size=(1_200, 3))
-    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
-                  & (faces[:, 0] != faces[:, 2])]
-    sizes = PieceSizes(n)
-    assert (sizes.compiled is None) == (kernels == "numpy")
-    for block in np.array_split(faces, 7):
-        sizes.add(block)
-    count, labels = vertex_components(n, faces)
-    assert count > 100, "many pieces, of several sizes"
-    assert sizes.result() == (count, int(np.bincount(labels).max()))
+    blobs = np.concatenate([hemisphere_cloud(20_000, seed=6)]
+                           + [rng.normal(centre, 0.01, (400, 3))
+                              for centre in rng.uniform(-0.4, 0.4, (12, 3))])
+    monkeypatch.setattr(tiling, "stitched_in_blocks", counted)
+    reconstruct(blobs, dict(SETTINGS, resolution=96, tile_cells=24, udf_source="nearest",
+                            outliers="keep", min_component_faces=0))
+    (pieces, whole), = made
+    assert whole[0] > 5, "several pieces, of several sizes"
+    assert pieces == whole
 
 
 def test_the_tile_by_tile_write_never_holds_the_whole_mesh(tmp_path, monkeypatch):
@@ -117,7 +128,6 @@ def test_the_tile_by_tile_write_never_holds_the_whole_mesh(tmp_path, monkeypatch
     points = hemisphere_cloud(30_000, seed=4)
     cloud = PointCloud(points, colors=np.random.default_rng(4).random((len(points), 3)))
     settings = dict(SETTINGS, resolution=128, tile_cells=24, udf_source="nearest")
-    PieceSizes(3).add(np.array([[0, 1, 2]]))  # the compiled kernels loaded before measuring
     real = to_file._write_stitched
     peaks = {}
 

@@ -7,7 +7,7 @@ import pytest
 
 from engine.meshing.mesh_ops import edge_topology, face_normals, vertex_components
 from engine.reconstruct import reconstruct
-from engine.tiles import plan_tiles
+from engine.tile_plan import plan_tiles
 
 RESOLUTION = 64
 TILE = 24
@@ -222,7 +222,8 @@ def _grid_sheet(x0, x1, y1, step):
 
 
 def test_a_tile_that_kept_the_other_side_is_found_and_the_seam_welds():
-    from engine.tiles import Tile, stitch, tiles_to_turn
+    from engine.tile_plan import Tile
+    from engine.tiles import stitch, tiles_to_turn
 
     step = 1.0 / 64
     left = _grid_sheet(-1.0, 0.0, 1.0, step)
@@ -256,7 +257,8 @@ def _punch(sheet, x_from, step):
 def test_only_the_seam_is_stitched():
     """A hole at the border is closed, one deep inside a tile is left as its mesher made it,
     and the faces away from the border come out as they went in."""
-    from engine.tiles import SEAM_CELLS, Tile, stitch
+    from engine.tile_plan import Tile
+    from engine.tiles import SEAM_CELLS, stitch
 
     step = 1.0 / 64
     left = _punch(_grid_sheet(-1.0, 0.0, 1.0, step), -0.5, step)             # deep inside
@@ -312,8 +314,8 @@ def test_the_turn_votes_gathered_tile_by_tile_are_those_of_all_seams_at_once(mon
     stitched_in_blocks = tiling.stitched_in_blocks
 
     def capture(pieces, tile_list, spacing, min_component_faces=0, folder=None):
-        captured.append((tiling._split_all(list(pieces), tile_list, spacing), tile_list,
-                         spacing))
+        held = tiling._split_all(list(pieces), tile_list, spacing, hold=True)
+        captured.append((held, tile_list, spacing))
         return stitched_in_blocks(pieces, tile_list, spacing, min_component_faces, folder)
 
     monkeypatch.setattr(tiling, "stitched_in_blocks", capture)
