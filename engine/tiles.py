@@ -40,7 +40,7 @@ import dataclasses
 import os
 import tempfile
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -197,10 +197,12 @@ def _rim(points, faces, near, tile, face_piece) -> dict:
         topo = edge_topology(faces)
         rim = np.unique(topo.edges[topo.counts == 1])
         rim = rim[near[rim]]
-    normal = (_vertex_normals(points, faces)[rim] if len(rim) else np.zeros((0, 3)))
+    normal = _vertex_normals(points, faces)[rim] if len(rim) else np.zeros((0, 3))
     return {"rim": rim, "rim_points": points[rim], "rim_tile": tile[rim],
             "rim_piece": _vertex_pieces(len(points), faces, face_piece)[rim],
             "rim_normal": normal}
+
+
 @dataclass
 class _Seam:
     """The seams of all the tiles' pieces (:class:`TilePiece`), joined; ``rests``: the rest of
