@@ -180,20 +180,28 @@ def _distinct_rows(points: np.ndarray):
     return (order if new.all() else order[new]), copy_of
 
 
+class _Steps:
+    """Counts the points a pass has done; each call reports the share and polls ``cancel``."""
+
+    def __init__(self, steps: int, label: str, progress: ProgressFn,
+                 cancel: Optional[CancelFn]):
+        self.steps, self.label, self.progress, self.cancel = steps, label, progress, cancel
+        self.done = 0
+
+    def __call__(self, count: int) -> None:
+        self.done += count
+        check_cancel(self.cancel)
+        share = self.done / self.steps
+        self.progress(share, f"{self.label}: {100.0 * share:.0f} %")
+
+
 def _isolated(points: np.ndarray, alive: np.ndarray, ratio: float,
               progress: ProgressFn = no_progress, cancel: Optional[CancelFn] = None,
               label: str = "") -> np.ndarray:
     """One pass of the spacing test on the distinct points ``points[alive]`` (``alive``:
     indices, in sorted order): (len(alive),) bool."""
     neighbours = min(NEIGHBOURS, len(alive) - 1)
-    steps, done = 2 * len(alive), 0
-
-    def step(count: int) -> None:
-        nonlocal done
-        done += count
-        check_cancel(cancel)
-        progress(done / steps, f"finding outliers ({label}): {100.0 * done / steps:.0f} %")
-
+    step = _Steps(2 * len(alive), f"finding outliers ({label})", progress, cancel)
     spacing = np.empty(len(alive))
     for which, distances, _ in _nearest_blocks(points, alive, alive, neighbours + 1, cancel):
         spacing[which] = distances[:, 1:].mean(axis=1)
@@ -220,15 +228,8 @@ def _on_the_surface(points: np.ndarray, rows: np.ndarray, flagged: np.ndarray,
     (see the module's text): (flagged.sum(),) bool."""
     suspects = rows[flagged]
     unflagged = rows[~flagged]
-    steps, done = 2 * len(suspects), 0
-
-    def step(count: int) -> None:
-        nonlocal done
-        done += count
-        check_cancel(cancel)
-        progress(done / steps, f"finding outliers (sparing surface points): "
-                               f"{100.0 * done / steps:.0f} %")
-
+    step = _Steps(2 * len(suspects), "finding outliers (sparing surface points)", progress,
+                  cancel)
     flat = np.empty(len(suspects), dtype=bool)
     for which, _, around in _nearest_blocks(points, rows, suspects, FLAT_NEIGHBOURS + 1,
                                             cancel):  # itself included

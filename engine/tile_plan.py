@@ -11,7 +11,7 @@ copy of it in the working frame is held) and one index per point.
 
 import math
 from dataclasses import dataclass
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, Optional, Tuple
 
 import numpy as np
 
@@ -28,19 +28,12 @@ class Tile:
     high: np.ndarray
 
 
-def plan_tiles(points: np.ndarray, spacing: float, tile_cells: int) -> List[Tile]:
-    """The tiles of ``tile_cells`` cells per side that hold at least one of ``points``
-    (working frame), in C order of their indices.
-
-    The outermost tiles reach to infinity on their outer sides, so every point is in exactly
-    one core.
-    """
-    return CloudTiles(points, spacing, tile_cells, 0.0).tiles
-
-
 class CloudTiles:
-    """A cloud's tiles (:attr:`tiles`, as :func:`plan_tiles`) and each tile's points
-    (:meth:`points_of`).
+    """A cloud's tiles (:attr:`tiles`) and each tile's points (:meth:`points_of`).
+
+    The tiles are those of ``tile_cells`` cells per side that hold at least one point, in C
+    order of their indices. The outermost tiles reach to infinity on their outer sides, so
+    every point is in exactly one core.
 
     Parameters
     ----------
@@ -81,15 +74,25 @@ class CloudTiles:
             tile_high = np.where(index == counts - 1, np.inf, self.low + (index + 1) * size)
             self.tiles.append(Tile(tuple(int(i) for i in index), tile_low, tile_high))
 
+    def _cores_near(self, number: int) -> np.ndarray:
+        """The cores within reach of tile ``number``'s core (flat indices)."""
+        ranges = [range(max(i - self._span, 0), min(i + self._span, n - 1) + 1)
+                  for i, n in zip(self.tiles[number].index, self._counts)]
+        return np.ravel_multi_index(np.meshgrid(*ranges, indexing="ij"), self._counts).ravel()
+
+    def cost_of(self, number: int) -> int:
+        """The points in the cores tile ``number`` reads from: at least its points, and what
+        gathering them costs."""
+        cores = self._cores_near(number)
+        return int((self._starts[cores + 1] - self._starts[cores]).sum())
+
     def points_of(self, number: int) -> np.ndarray:
         """The points (working frame) within ``reach`` of tile ``number``'s core, per axis, in
         the cloud's order."""
         tile = self.tiles[number]
-        ranges = [range(max(i - self._span, 0), min(i + self._span, n - 1) + 1)
-                  for i, n in zip(tile.index, self._counts)]
-        cores = np.ravel_multi_index(np.meshgrid(*ranges, indexing="ij"), self._counts).ravel()
         candidates = np.sort(np.concatenate(
-            [self._order[self._starts[core]:self._starts[core + 1]] for core in cores]))
+            [self._order[self._starts[core]:self._starts[core + 1]]
+             for core in self._cores_near(number)]))
         unit = self.to_unit(self.points[candidates])
         inside = np.all((unit >= tile.low - self.reach) & (unit < tile.high + self.reach),
                         axis=1)

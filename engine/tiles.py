@@ -939,7 +939,7 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
         return (cloud.points_of(number), tiles[number], anchor, settings, meshing, udf_source)
 
     # a tile's work follows the points it reads: workers take the largest tiles first
-    costs = [len(cloud.points_of(number)) for number in range(len(tiles))]
+    costs = [cloud.cost_of(number) for number in range(len(tiles))]
     with tempfile.TemporaryDirectory(prefix="udf-tiles-") as folder:
 
         def keep(number: int, result: tuple, side: str = "") -> tuple:

@@ -7,7 +7,7 @@ import pytest
 
 from engine.meshing.mesh_ops import edge_topology, face_normals, vertex_components
 from engine.reconstruct import reconstruct
-from engine.tile_plan import plan_tiles
+from engine.tile_plan import CloudTiles
 
 RESOLUTION = 64
 TILE = 24
@@ -58,8 +58,8 @@ def meshes():
 def test_the_cloud_is_cut_into_several_tiles(meshes):
     cloud, whole, tiled = meshes
     assert "tiles" not in whole.stats
-    assert tiled.stats["tiles"] == len(plan_tiles(cloud / np.ptp(cloud, axis=0).max(),
-                                                  1.0 / RESOLUTION, TILE)) >= 8
+    unit = cloud / np.ptp(cloud, axis=0).max()
+    assert tiled.stats["tiles"] == len(CloudTiles(unit, 1.0 / RESOLUTION, TILE, 0.0).tiles) >= 8
 
 
 def test_tiles_match_one_grid(meshes):
