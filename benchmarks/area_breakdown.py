@@ -3,7 +3,7 @@
     python benchmarks/area_breakdown.py DOMAIN CONDITION [--seed 1000000] [--radius-mode fixed]
         [--resolution 256] [--mesh saved.npz]
 
-DOMAIN ``real`` takes the ``--seed``-th mesh of ``lab.bench.dataset.REAL_SHAPES`` (0-9).
+DOMAIN ``real`` takes the ``--seed``-th mesh of ``lab.bench.dataset.REAL_SHAPES`` (0-11).
 
 Reconstructs one test shape of the benchmark (``lab.bench.dataset``) as ``python -m lab bench``
 does (rooms: both meshes cropped as the benchmark crops them), then samples the true surface and

@@ -25,7 +25,8 @@ REAL = "real"  # the bench's out-of-domain set: the meshes of REAL_SHAPES, by in
 
 REAL_SHAPES = ("cgal/bunny00.off", "cgal/fandisk.off", "cgal/mushroom.off", "cgal/horizons.off",
                "cgal/elephant-with-holes.off", "cgal/ChineseDragon-10kv.off", "scans/owl.ply",
-               "scans/plasticVase.ply", "rangemap/face000.ply", "misc/airplane.ply")
+               "scans/plasticVase.ply", "rangemap/face000.ply", "misc/airplane.ply",
+               "scans/blackVase.ply", "scans/birdBath.ply")
 """Paths under ``<shared>/data/real`` of the real meshes used as out-of-domain checks."""
 
 _TEST_SEED_BASE = 1_000_000

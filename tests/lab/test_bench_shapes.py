@@ -185,7 +185,8 @@ def test_real_shapes_load_in_the_unit_frame():
     shapes = dataset.real_shapes()
     assert [name for name, _ in shapes] == [
         "bunny00", "fandisk", "mushroom", "horizons", "elephant-with-holes",
-        "ChineseDragon-10kv", "owl", "plasticVase", "face000", "airplane"]
+        "ChineseDragon-10kv", "owl", "plasticVase", "face000", "airplane", "blackVase",
+        "birdBath"]
     for _, mesh in shapes:
         extent = np.ptp(mesh.vertices, axis=0)
         assert abs(extent.max() - 1.0) < 1e-9 and len(mesh.faces) > 0
