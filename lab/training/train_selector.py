@@ -16,11 +16,14 @@
    output logit 2 beyond the targets' largest (zero in use; it pulls outputs back out of the
    sigmoid's flat ends). The first ``--head-epochs`` train the head only, from the standardised
    extra features (code at 0, encoder frozen); then everything trains.
-3. Evaluation on held-out queries of held-out shapes (5 more training seeds per domain, rooms
-   included although rooms are never trained on): mean absolute UDF error of every single fixed
-   candidate radius (and the product's default fixed radius), the curvature policy at the
-   product's default range, the learned selector and the per-query oracle, run through the
-   backbone at each policy's radii; per domain and per scan condition.
+3. Evaluation on held-out queries of held-out shapes, rooms included although rooms are never
+   trained on: the 5 training seeds per domain after ``--shapes`` (1 clean, 2 sparse, 2 noisy)
+   and :data:`BALANCED_SEEDS` (15 per domain, 5 of each condition, past every training and
+   dense seed): mean absolute UDF error of every single fixed candidate radius (and the
+   product's default fixed radius), the curvature policy at the product's default range, the
+   learned selector and the per-query oracle, run through the backbone at each policy's radii;
+   per domain and per scan condition (:func:`evaluate`; ``python -m
+   lab.training.evaluate_selector`` evaluates a selector file alone).
 """
 
 import argparse
@@ -47,6 +50,10 @@ TRAIN_DOMAINS = ("cars", "garments")
 EVAL_DOMAINS = ("cars", "garments", "rooms")
 LOGIT_MARGIN = 2.0  # the penalty starts this far (in logits) beyond the targets
 HELD_OUT = 5
+BALANCED_SEEDS = tuple(range(100, 115))
+"""The balanced held-out shapes of every domain: training seeds 100-114, scanned clean, sparse
+and noisy five times each (the seed's condition, :func:`.selector_data.condition_of`), never
+trained on while ``--shapes`` + 5 + ``--dense-shapes`` stays at most 100."""
 
 
 def training_shapes(args):
@@ -148,14 +155,18 @@ def train(args, data):
     return model
 
 
-def evaluate(args, predict, selector):
-    """Mean |UDF error| per policy, per domain and per scan condition, on held-out shapes (unit
-    frame)."""
+def held_out_seeds(args) -> list:
+    """The 5 training seeds after the ``--shapes`` trained on."""
+    return list(range(args.shapes, args.shapes + HELD_OUT))
+
+
+def evaluate(args, predict, selector, seeds):
+    """Mean |UDF error| per policy, per domain and per scan condition, on the held-out training
+    shapes ``seeds`` of every domain (unit frame)."""
     product = ReconstructSettings()
     fixed_radii = sorted(set(np.round(grid_radii(args), 6)) | {product.radius})
     results = {}
     for domain in EVAL_DOMAINS:
-        seeds = train_seeds(domain, args.shapes + HELD_OUT)[args.shapes:]
         errors = {f"fixed {r:.4f}": [] for r in fixed_radii}
         errors.update({"curvature": [], "learned": [], "oracle grid radius": []})
         conditions = []
@@ -233,6 +244,9 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args(argv)
+    if args.shapes + HELD_OUT + args.dense_shapes > BALANCED_SEEDS[0]:
+        parser.error(f"--shapes + {HELD_OUT} + --dense-shapes must stay at most "
+                     f"{BALANCED_SEEDS[0]}: the balanced held-out shapes start there")
     started = time.time()
     predict = backbone_predictor("cpu")
     # error curves belong to one backbone: key the cache by its weights
@@ -245,11 +259,13 @@ def main(argv=None):
     trained = time.time()
     selector = NumpySelector({k: v.detach().numpy() for k, v in model.state_dict().items()},
                              model.config)
-    metrics = evaluate(args, predict, selector)
+    metrics = evaluate(args, predict, selector, held_out_seeds(args))
+    balanced = evaluate(args, predict, selector, BALANCED_SEEDS)
     meta = {"args": vars(args), "training_queries": int(len(data["udf"])),
             "seconds": {"cache": cached - started, "train": trained - cached,
                         "evaluate": time.time() - trained},
-            "held_out_mean_abs_udf_error": metrics}
+            "held_out_mean_abs_udf_error": metrics,
+            "balanced_held_out_mean_abs_udf_error": balanced}
     save_weights(model, args.out, meta)
     Path(args.out).with_suffix(".json").write_text(json.dumps(meta, indent=2))
     print(json.dumps(meta, indent=2))

@@ -93,3 +93,21 @@ def test_log_spaced_radii_take_the_parabola_in_log_r():
     assert parabola_targets((radii - 0.01)[None], radii)[0] == pytest.approx(0.015, rel=1e-12)
     with pytest.raises(ValueError, match="evenly spaced"):
         parabola_targets(errors[None], np.array([0.01, 0.02, 0.05] + list(radii[3:])))
+
+
+def test_balanced_held_out_shapes_are_never_trained_on_and_cover_each_condition_alike():
+    import argparse
+
+    import pytest
+
+    from lab.training import train_selector as ts
+    from lab.training.selector_data import TRAINING_CONDITIONS, condition_of
+
+    conditions = [TRAINING_CONDITIONS[condition_of(seed)] for seed in ts.BALANCED_SEEDS]
+    assert sorted(conditions.count(name) for name in TRAINING_CONDITIONS) == [5, 5, 5]
+    args = argparse.Namespace(shapes=40, dense_shapes=10, dense_points=150_000)
+    trained = {seed for _, seed, _, _ in ts.training_shapes(args)}
+    assert trained.isdisjoint(ts.BALANCED_SEEDS)
+    assert trained.isdisjoint(ts.held_out_seeds(args))
+    with pytest.raises(SystemExit):  # dense shapes would reach the balanced ones
+        ts.main(["--shapes", "40", "--dense-shapes", "60"])
