@@ -6,8 +6,8 @@
 Runs :func:`.train_selector.evaluate` on ``--count`` held-out training shapes of every domain
 from ``--first-seed`` (by default :data:`.train_selector.BALANCED_SEEDS`: 5 clean, 5 sparse, 5
 noisy; rooms are never trained on), at the product's learned range
-(``engine.settings.MODE_RANGES``) and the candidate radii the shipped selector was trained
-with, and prints per domain and condition: the learned error, the best single fixed radius of
+(``engine.settings.MODE_RANGES``) and the candidate radii the selector was trained with (read
+from the training record ``train_selector`` writes beside it, ``<selector>.json``), and prints per domain and condition: the learned error, the best single fixed radius of
 the range on these very queries, fixed 0.018 and curvature (mean |UDF error| x 10^4, unit
 frame).
 """
@@ -15,13 +15,24 @@ frame).
 import argparse
 import json
 import types
+from pathlib import Path
 
 from engine.field import backbone_predictor
 from engine.selector import DEFAULT_WEIGHTS, load_selector_numpy
 from engine.settings import MODE_RANGES
 from .train_selector import BALANCED_SEEDS, evaluate
 
-CANDIDATES, SPACING = 10, "log"  # the shipped selector's training grid (SELECTOR_CARD.md)
+
+
+def training_grid(selector: str) -> tuple[int, str]:
+    """The candidate count and spacing ``selector`` was trained with, from its training record."""
+    record = Path(selector).with_suffix(".json")
+    try:
+        args = json.loads(record.read_text())["args"]
+        return int(args["candidates"]), str(args["spacing"])
+    except (OSError, ValueError, KeyError) as error:
+        raise SystemExit(f"cannot read the training record {record} of {selector} "
+                         f"({error}); it names the candidate radii to compare against") from None
 
 
 def table(results: dict) -> str:
@@ -51,8 +62,9 @@ def main(argv=None):
     parser.add_argument("--out", help="write the means as JSON here too")
     args = parser.parse_args(argv)
     parent, rho_min, rho_max = MODE_RANGES["learned"]
+    candidates, spacing = training_grid(args.selector)
     grid = types.SimpleNamespace(parent_radius=parent, rho_min=rho_min, rho_max=rho_max,
-                                 candidates=CANDIDATES, spacing=SPACING, queries=args.queries)
+                                 candidates=candidates, spacing=spacing, queries=args.queries)
     seeds = list(range(args.first_seed, args.first_seed + args.count))
     results = evaluate(grid, backbone_predictor("cpu"), load_selector_numpy(args.selector),
                        seeds)

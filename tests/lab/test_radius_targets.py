@@ -111,3 +111,16 @@ def test_balanced_held_out_shapes_are_never_trained_on_and_cover_each_condition_
     assert trained.isdisjoint(ts.held_out_seeds(args))
     with pytest.raises(SystemExit):  # dense shapes would reach the balanced ones
         ts.main(["--shapes", "40", "--dense-shapes", "60"])
+
+
+def test_selector_evaluation_compares_against_the_radii_the_selector_was_trained_with(tmp_path):
+    import json
+    from engine.selector import DEFAULT_WEIGHTS
+    from lab.training.evaluate_selector import training_grid
+    record = json.loads(DEFAULT_WEIGHTS.with_suffix(".json").read_text())["args"]
+    assert training_grid(str(DEFAULT_WEIGHTS)) == (record["candidates"], record["spacing"])
+    (tmp_path / "other.json").write_text(json.dumps({"args": {"candidates": 7,
+                                                              "spacing": "linear"}}))
+    assert training_grid(str(tmp_path / "other.npz")) == (7, "linear")
+    with pytest.raises(SystemExit, match="training record"):
+        training_grid(str(tmp_path / "missing.npz"))
