@@ -160,11 +160,10 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     written = None
     if tile_cells:
         mark = time.perf_counter()
-        consume = None
-        if write_tiled is not None:
-            def consume(stitched, write_progress):
-                counts = (stitched.vertex_count, stitched.face_count)
-                return counts + write_tiled(stitched, frame, colors, tree, write_progress)
+        def write_counted(stitched, write_progress):
+            counts = (stitched.vertex_count, stitched.face_count)
+            return counts + write_tiled(stitched, frame, colors, tree, write_progress)
+        consume = None if write_tiled is None else write_counted
         output, field_stats, mesh_stats = mesh_in_tiles(
             points, settings, meshing_settings(settings), tile_cells, udf_source,
             sub_progress(progress, 0.01, _MESH_END), cancel, consume, frame.to_unit)

@@ -48,10 +48,9 @@ def reconstruct_to_file(cloud: Union[PointCloud, np.ndarray], path,
 
     settings = ReconstructSettings.coerce(settings)
     path = os.fspath(path)
-    write_tiled = None
-    if os.path.splitext(path)[1].lower() == ".ply":
-        def write_tiled(stitched, frame, colors, tree, write_progress):
-            return _write_stitched(path, stitched, frame, colors, tree, write_progress, cancel)
+    def write_ply(stitched, frame, colors, tree, write_progress):
+        return _write_stitched(path, stitched, frame, colors, tree, write_progress, cancel)
+    write_tiled = write_ply if os.path.splitext(path)[1].lower() == ".ply" else None
 
     with core_budget(settings.workers):
         result = _reconstruct(cloud, settings, progress, cancel, udf_source, write_tiled)

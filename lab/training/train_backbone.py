@@ -178,7 +178,6 @@ def main(argv=None):
         return np.concatenate(out)
 
     def save(final=False):
-        nonlocal elapsed
         state = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "step": step,
                  "elapsed": elapsed, "args": vars(args)}
         torch.save(state, run_dir / "last.tmp")

@@ -100,7 +100,7 @@ def test_the_batch_reports_each_bad_file_and_saves_only_the_good_mesh(extension,
     assert done.returncode == 1
     assert "done: 1 of 5 reconstructed" in done.stdout
     for name in ("cut.ply", "notes.ply", "huge.npy", "ten.xyz"):
-        (line,) = [x for x in done.stderr.splitlines() if x.startswith(f"[") and
+        (line,) = [x for x in done.stderr.splitlines() if x.startswith("[") and
                    f" {name}: error: " in x]
         assert "Traceback" not in line
         assert f"failed: {scans / name}: " in done.stdout
