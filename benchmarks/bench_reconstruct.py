@@ -77,6 +77,7 @@ def run_one(path: str, resolution: int, device: str, udf_source: str, radius_mod
             "parent_s": stats.get("seconds_parent_ball", 0.0),
             "lattice_step": stats.get("lattice_step", 1),
             "lattice_positions": stats.get("lattice_positions", 0),
+            "lattice_own_nodes": stats.get("lattice_own_nodes", 0),
             "iterations": stats["meshing"].get("iterations", 0),
             "optimize_kernels": stats["meshing"].get("optimize_kernels", "numpy"),
             "macs_per_query": _macs_per_query(stats["mean_patch_points"])}
@@ -88,7 +89,9 @@ def _policy_detail(row: dict, queries: int, rest: float) -> str:
     if row["lattice_step"] > 1:
         return (f"(on a lattice of one node in {row['lattice_step']} along each axis: "
                 f"{row['lattice_positions']:,} positions, "
-                f"{100 * row['lattice_positions'] / queries:.0f}% of the queries)")
+                f"{100 * row['lattice_positions'] / queries:.0f}% of the queries, and at "
+                f"{row['lattice_own_nodes']:,} ridge nodes, "
+                f"{100 * row['lattice_own_nodes'] / queries:.0f}%)")
     return (f"(its parent-ball neighbour search, whose lists also give the backbone its "
             f"patches: {1e6 * row['parent_s'] / queries:.1f} us per query; the policy without "
             f"it adds {100 * (row['radius_s'] - row['parent_s']) / rest:.0f}%)")

@@ -49,7 +49,7 @@ from .patches import (MAX_POINTS, QUERY_CHUNK, gather_patches, groups_by_count,
 from .progress import CancelFn, ProgressFn, check_cancel, no_progress
 from .radius import (max_radius, parent_ball, radii_for_queries, reads_parent_ball,
                      require_policy)
-from .radius_lattice import lattice_radii, lattice_step
+from .radius_lattice import lattice_radii, lattice_step, ridge_nodes
 from .settings import UDF_SOURCES, ReconstructSettings, radius_range
 
 # Balls with fewer points use the nearest-point distance (see the module docstring).
@@ -278,7 +278,8 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     band_radius = max(min(max_radius(settings), BAND_RADIUS_CAP), MIN_BAND_NODES * spacing)
     shape, origin, spacing = grid_layout(points, settings.resolution, band_radius, anchor,
                                          bounds)
-    indices, nearest = find_band(tree, points, shape, origin, spacing, band_radius, cancel)
+    indices, nearest, owner = find_band(tree, points, shape, origin, spacing, band_radius,
+                                        cancel, with_owner=True)
     seconds_band = time.perf_counter() - started
     stats = {"grid_shape": shape, "spacing": spacing, "band_radius": band_radius,
              "band_nodes": int(len(indices)), "udf_source": udf_source, "device": "none",
@@ -294,11 +295,13 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
         # the radius lattice is anchored where the tiles of one reconstruction share a node
         lattice_origin = origin if anchor is None else np.asarray(anchor, dtype=np.float64)
         nodes = indices[near] + np.rint((origin - lattice_origin) / spacing).astype(np.int64)
-        values[near] = _network_values(points, tree, origin + indices[near] * spacing,
-                                       nearest[near], settings, predictor, progress, cancel,
-                                       stats, (nodes, lattice_origin, spacing))
+        queries = origin + indices[near] * spacing
+        values[near] = _network_values(points, tree, queries, nearest[near], settings,
+                                       predictor, progress, cancel, stats,
+                                       (nodes, lattice_origin, spacing, owner[near]))
     else:
         values = nearest.astype(np.float32)
+    del owner
     stats["gap_nodes"], stats["seconds_gap_fill"] = 0, 0.0
     if settings.fill_gaps:
         progress(0.95, "filling the gaps of a sparse scan")
@@ -341,9 +344,10 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     (:mod:`engine.cpu_threads`), each batch whole: its neighbour search, radius policy and
     backbone. A batch is cut and computed the same way on any number of threads.
 
-    ``lattice``: ``(nodes, lattice_origin, spacing)``, the queries' grid nodes. Where the
-    policy's parent ball spans many spacings its radii come from a coarser lattice
-    (:mod:`engine.radius_lattice`), before the batches.
+    ``lattice``: ``(nodes, lattice_origin, spacing, owner)``, the queries' grid nodes and the
+    index of each one's nearest point. Where the policy's parent ball spans many spacings its
+    radii come from a coarser lattice (:mod:`engine.radius_lattice`), before the batches;
+    on the ridges of the nearest-point distance a node keeps its own radius where wider.
     """
     if predictor is None:
         device = resolve_device(settings.device)
@@ -363,11 +367,14 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
     lattice_seconds, on_lattice = 0.0, None
     if step > 1:
         lattice_seconds = time.perf_counter()
+        nodes, lattice_origin, spacing, owner = lattice
+        ridge = ridge_nodes(nodes, queries - points[owner], spacing)
         on_lattice, found = lattice_radii(
             lambda positions: radii_for_queries(settings, tree, points, positions,
                                                 parent_ball(settings, tree, positions)),
-            lattice[0], lattice[1], lattice[2], step, threads, cancel)
+            nodes, lattice_origin, spacing, step, threads, cancel, own=ridge)
         stats["lattice_positions"] = found["lattice_positions"]
+        stats["lattice_own_nodes"] = found["lattice_own_nodes"]
         lattice_seconds = time.perf_counter() - lattice_seconds
 
     def one_batch(start: int) -> dict:
