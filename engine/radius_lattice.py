@@ -28,7 +28,7 @@ across one surface lie within a spacing of it together). :func:`ridge_nodes` fin
 resolution 256, 5 % of the network's nodes on the owl, 7-9 % on the benchmark's first garment
 and room, 12-17 % on its first car (clean and sparse), whose closed parts nest and touch. The
 policy runs at each of them too, and a ridge node takes its own radius where that is wider
-than the blend. (Where it is narrower, the blend stays: on a sparse scan most ridge nodes lie
+than the blend. (Where it is narrower, the blend stays: on a sparse scan many ridge nodes lie
 in the holes between its points, on the surface, and the blend's smoother radii there gave
 the benchmark's sparse cars a mesh as good or slightly better.)
 
