@@ -140,7 +140,7 @@ def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
 
     Returns
     -------
-    f, g : (P,) int64; gap : (P,) float64 voxels.
+    f, g : (P,) int64, ordered by f, then g; gap : (P,) float64 voxels.
     """
     from scipy.spatial import cKDTree
 
@@ -181,6 +181,15 @@ def find_twins(cents: np.ndarray, normals: np.ndarray, field, spacing: float,
     return lo[first], hi[first], gap[first]
 
 
+def _is_twin(keys: np.ndarray, twin_keys: np.ndarray) -> np.ndarray:
+    """Which of ``keys`` are among ``twin_keys`` (sorted and unique, as :func:`find_twins`
+    gives them): a binary search each, no sort of ``keys``."""
+    if len(twin_keys) == 0:
+        return np.zeros(len(keys), bool)
+    at = np.minimum(np.searchsorted(twin_keys, keys), len(twin_keys) - 1)
+    return twin_keys[at] == keys
+
+
 def _parity_forest(m: int, twin_f: np.ndarray, twin_g: np.ndarray, twin_weight: np.ndarray,
                    pairs: np.ndarray, pair_weight: np.ndarray):
     """Minimum spanning forest of the signed graph and each node's parity along it.
@@ -197,8 +206,7 @@ def _parity_forest(m: int, twin_f: np.ndarray, twin_g: np.ndarray, twin_weight: 
     from scipy.sparse.csgraph import minimum_spanning_tree
 
     lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-    twin = np.isin(lo.astype(np.int64) * m + hi, twin_f.astype(np.int64) * m + twin_g,
-                   assume_unique=True)
+    twin = _is_twin(lo.astype(np.int64) * m + hi, twin_f.astype(np.int64) * m + twin_g)
     lo, hi, pair_weight = lo[~twin], hi[~twin], pair_weight[~twin]
     # the sign travels in the weight: opposite constraints weigh under 1.5, the others above
     # (1 is added since the spanning tree reads a weight of 0 as no edge)
