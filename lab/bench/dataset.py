@@ -206,29 +206,64 @@ def _near(v: np.ndarray, f: np.ndarray, tree, max_dist: float,
     """Per face: one of its corners, edge midpoints or centroid lies within ``max_dist`` of a
     point (with ``normals``: of one of the 8 nearest points whose normal is the face's and which
     lies in the face's plane)."""
+    from engine.cpu_threads import query_threads
+
     if len(f) == 0:
         return np.zeros(0, bool)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    probes = np.stack([a, b, c, (a + b) / 2, (b + c) / 2, (c + a) / 2, (a + b + c) / 3], 1)
-    reach = max_dist + np.linalg.norm(probes - probes[:, 6:7], axis=2).max(axis=1)
-    dist, _ = tree.query(probes[:, 6], distance_upper_bound=float(reach.max()))
+    centroid = (a + b + c) / 3
+    reach = max_dist + np.sqrt(np.max([((p - centroid) ** 2).sum(axis=1) for p in
+                                       (a, b, c, (a + b) / 2, (b + c) / 2, (c + a) / 2)], axis=0))
+    dist, _ = tree.query(centroid, distance_upper_bound=float(reach.max()),
+                         workers=query_threads())
     maybe = np.flatnonzero(dist <= reach)  # the centroid test prunes before the 7 probes
     keep = np.zeros(len(f), bool)
-    if normals is None:
-        dist, _ = tree.query(probes[maybe].reshape(-1, 3), distance_upper_bound=max_dist)
-        keep[maybe] = (dist.reshape(-1, 7) <= max_dist).any(axis=1)
-        return keep
-    k = _SAME_SURFACE_NEIGHBOURS
-    dist, idx = tree.query(probes[maybe].reshape(-1, 3), k=k, distance_upper_bound=max_dist)
-    face_normal = np.cross(b - a, c - a)[maybe]
-    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
-    found = dist.reshape(-1, 7, k) <= max_dist
-    nearest = np.where(found, idx.reshape(-1, 7, k), 0)
-    same = np.abs(np.einsum("fpkc,fc->fpk", normals[nearest], face_normal)) > _SAME_SURFACE_COS
-    offset = np.einsum("fpkc,fc->fpk", tree.data[nearest] - a[maybe, None, None], face_normal)
-    same &= np.abs(offset) < _SAME_SURFACE_OFFSET * max_dist
-    keep[maybe] = (found & same).any(axis=(1, 2))
+    k = 1 if normals is None else _SAME_SURFACE_NEIGHBOURS
+    corner = a[maybe]
+    face_normal = None
+    if normals is not None:
+        face_normal = np.cross(b - a, c - a)[maybe]
+        face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
+    near = np.zeros(len(maybe), bool)
+    for dist, idx in _probe_neighbours(v, f[maybe], centroid[maybe], tree, max_dist, k):
+        found = dist <= max_dist  # (F, probes, k)
+        if normals is not None:
+            nearest = np.where(found, idx, 0)
+            found &= np.abs(np.einsum("fpkc,fc->fpk", normals[nearest],
+                                      face_normal)) > _SAME_SURFACE_COS
+            offset = np.einsum("fpkc,fc->fpk", tree.data[nearest] - corner[:, None, None],
+                               face_normal)
+            found &= np.abs(offset) < _SAME_SURFACE_OFFSET * max_dist
+        near |= found.any(axis=(1, 2))
+    keep[maybe] = near
     return keep
+
+
+def _probe_neighbours(v: np.ndarray, f: np.ndarray, centroid: np.ndarray, tree,
+                      max_dist: float, k: int):
+    """The ``k`` nearest points within ``max_dist`` of each face's 7 probes: distances and
+    indices, (F, 3, k) for its corners, (F, 3, k) for its edge midpoints, (F, 1, k) for its
+    centroid. A corner or a midpoint shared by several faces is queried once (a shared edge's
+    midpoint is the same sum either way)."""
+    from engine.cpu_threads import query_threads
+
+    def query(positions):
+        dist, idx = tree.query(positions, k=k, distance_upper_bound=max_dist,
+                               workers=query_threads())
+        return dist.reshape(len(positions), k), idx.reshape(len(positions), k)
+
+    corners, corner_of = np.unique(f, return_inverse=True)
+    dist, idx = query(v[corners])
+    corner_of = corner_of.reshape(-1, 3)
+    yield dist[corner_of], idx[corner_of]
+    ends = np.stack([f, np.roll(f, -1, axis=1)], axis=2)  # (F, 3, 2): ab, bc, ca
+    low, high = ends.min(axis=2), ends.max(axis=2)
+    keys, edge_of = np.unique(low * np.int64(len(v)) + high, return_inverse=True)
+    dist, idx = query((v[keys // len(v)] + v[keys % len(v)]) / 2)
+    edge_of = edge_of.reshape(-1, 3)
+    yield dist[edge_of], idx[edge_of]
+    dist, idx = query(centroid)
+    yield dist[:, None], idx[:, None]
 
 
 def split_long_edges(v: np.ndarray, f: np.ndarray, max_edge: float):

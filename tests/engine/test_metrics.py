@@ -270,3 +270,25 @@ def test_area_ratio_thin_once_reads_one_for_a_thin_part_made_one_sheet():
     assert pocket["gt_double_layer"] == 0.0 and pocket["gt_close_sheets"] > 0.95
     assert pocket["area_ratio"] == pytest.approx(0.5, rel=0.01)
     assert pocket["area_ratio_thin_once"] == pytest.approx(1.0, rel=0.03)
+
+
+def test_truth_terms_are_computed_once_and_follow_the_truth():
+    """Scoring several predictions against one truth computes the truth's own terms once (the
+    same numbers as a fresh computation); another truth, even of the same size, gets its own."""
+    from engine import metrics
+
+    v, f = _sphere()
+    doubled = (np.vstack([v, v * 1.002]), np.vstack([f, f[:, ::-1] + len(v)]))
+    metrics._TRUTH_TERMS.clear()
+    first = metrics.layer_scores(v, f, *doubled, distance=1 / 64)
+    assert len(metrics._TRUTH_TERMS) == 1
+    again = metrics.layer_scores(v * 1.001, f, *doubled, distance=1 / 64)
+    assert len(metrics._TRUTH_TERMS) == 1
+    assert again["gt_double_layer"] == first["gt_double_layer"] > 0.99
+    moved = (doubled[0] * [1.0, 1.0, 1.5], doubled[1])  # same size, other content
+    other = metrics.layer_scores(v, f, *moved, distance=1 / 64)
+    assert len(metrics._TRUTH_TERMS) == 2
+    assert other["area_ratio"] != first["area_ratio"]
+    metrics._TRUTH_TERMS.clear()
+    fresh = metrics.layer_scores(v, f, *doubled, distance=1 / 64)
+    assert fresh == first

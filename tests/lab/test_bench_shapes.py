@@ -254,3 +254,45 @@ def test_crop_with_normals_leaves_out_a_sheet_hidden_under_a_seen_one():
     crop = crop_to_input(both, points, 0.01, normals)
     assert _area(crop) == pytest.approx(_area(crop_to_input(board, points, 0.01, normals)))
     assert _area(crop) > 0.99 and np.allclose(crop.vertices[:, 2], 0.007)
+
+
+def _near_reference(v, f, points, max_dist, normals=None):
+    """``dataset._near`` written out probe by probe: each face's corners, edge midpoints and
+    centroid, with the 8 nearest points of each (same surface with ``normals``)."""
+    tree = cKDTree(points)
+    keep = np.zeros(len(f), bool)
+    for i, (a, b, c) in enumerate(v[f]):
+        normal = np.cross(b - a, c - a)
+        normal /= np.linalg.norm(normal)
+        for probe in (a, b, c, (a + b) / 2, (b + c) / 2, (c + a) / 2, (a + b + c) / 3):
+            dist, idx = tree.query(probe, k=8, distance_upper_bound=max_dist)
+            for d, j in zip(dist, idx):
+                if d > max_dist:
+                    continue
+                if normals is None or (abs(normals[j] @ normal) > 0.7
+                                       and abs((points[j] - a) @ normal) < 0.25 * max_dist):
+                    keep[i] = True
+    return keep
+
+
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_crop_probes_each_corner_midpoint_and_centroid(with_normals):
+    """The crop's face test, which queries a corner or midpoint shared by several faces once,
+    keeps exactly the faces that the probe-by-probe test keeps: a bumpy sheet of small faces
+    and a scan of part of it, some points tilted away from it."""
+    rng = np.random.default_rng(3)
+    n = 24
+    u, w = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    v = np.column_stack([u.ravel(), w.ravel(), 0.01 * np.sin(9 * u.ravel()) * np.cos(7 * w.ravel())])
+    cell = np.arange(n * n).reshape(n, n)[:-1, :-1].ravel()
+    f = np.concatenate([np.column_stack([cell, cell + n, cell + 1]),
+                        np.column_stack([cell + 1, cell + n, cell + n + 1])])
+    points = np.column_stack([rng.uniform(0, 0.6, 3000), rng.uniform(0, 1, 3000),
+                              rng.normal(0, 0.004, 3000)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    normals[::3] = [0.8, 0.0, 0.6]  # tilted: not the sheet's own points
+    normals = normals if with_normals else None
+    keep = dataset._near(v, f, cKDTree(points), 0.02, normals)
+    expected = _near_reference(v, f, points, 0.02, normals)
+    assert 0 < expected.sum() < len(f)
+    np.testing.assert_array_equal(keep, expected)
