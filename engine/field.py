@@ -304,7 +304,7 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     del owner
     stats["gap_nodes"], stats["seconds_gap_fill"] = 0, 0.0
     if settings.fill_gaps:
-        progress(0.95, "filling the gaps of a sparse scan")
+        progress(0.9, "looking for gaps between the scan's points")
         filling = time.perf_counter()
         indices, values, stats["gap_nodes"] = fill_gaps(
             tree, points, shape, origin, spacing, indices, values,
@@ -420,7 +420,7 @@ def _network_values(points: np.ndarray, tree, queries: np.ndarray, nearest: np.n
             for key in totals:
                 totals[key] += result[key]
             done += result["count"]
-            progress(0.1 + 0.9 * done / len(queries),
+            progress(0.1 + 0.8 * done / len(queries),  # the gap fill follows, up to 1
                      f"network UDF: {done:,} / {len(queries):,} queries")
     finally:
         results.close()  # on a cancel from the progress report too: start no other batch
