@@ -566,20 +566,24 @@ def test_saved_meshes_are_scored_again_under_a_new_crop_without_running_the_meth
 
 def test_the_truth_crop_is_kept_and_read_back_the_same(tmp_path, monkeypatch):
     """The crop of a truth to its clean scan is computed once and read back from the cache,
-    identical; another scan crops afresh."""
+    identical to a fresh crop; another scan crops afresh."""
     from lab.bench import dataset as real
 
     monkeypatch.setattr(harness, "CROP_CACHE", tmp_path)
-    gt = real.make_shape("garments", 1000000)
-    scan = real.make_input(gt, "garments", "clean", 1000000)
-    half = PointCloud(scan.points[scan.points[:, 0] < 0], scan.normals[scan.points[:, 0] < 0])
-    first = harness._cropped_truth(real.crop_to_input, gt, scan, 0.01)
+    square = Mesh(np.array([[0.0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]]),
+                  np.array([[0, 1, 2], [0, 2, 3]]))
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0, 0.06, 4000), rng.uniform(0, 0.1, 4000),
+                              np.zeros(4000)])
+    scan = PointCloud(points, np.tile([0.0, 0.0, 1.0], (len(points), 1)))
+    first = harness._cropped_truth(real.crop_to_input, square, scan, 0.01)
     assert len(list(tmp_path.glob("truth_crop_*.npz"))) == 1
-    again = harness._cropped_truth(real.crop_to_input, gt, scan, 0.01)
+    again = harness._cropped_truth(real.crop_to_input, square, scan, 0.01)
     np.testing.assert_array_equal(again.vertices, first.vertices)
     np.testing.assert_array_equal(again.faces, first.faces)
-    fresh = real.crop_to_input(gt, scan.points, 0.01, scan.normals)
+    fresh = real.crop_to_input(square, scan.points, 0.01, scan.normals)
     np.testing.assert_array_equal(fresh.faces, first.faces)
-    other = harness._cropped_truth(real.crop_to_input, gt, half, 0.01)
+    half = PointCloud(points[points[:, 0] < 0.03], scan.normals[points[:, 0] < 0.03])
+    other = harness._cropped_truth(real.crop_to_input, square, half, 0.01)
     assert len(list(tmp_path.glob("truth_crop_*.npz"))) == 2
-    assert len(other.faces) < len(first.faces)
+    assert 0 < len(other.faces) < len(first.faces)
