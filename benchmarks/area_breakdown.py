@@ -23,7 +23,9 @@ splits the share of it that lies farther than 0.5, 1 and 2 grid spacings from th
 It also prints the share of the mesh farther than one spacing from the truth, the area
 ratio against the truth with its close sheets counted once (area x (1 - close share / 2)), and
 where extra area lies: the mesh's and the truth's area within 1, 2, 4 and 8 spacings of the
-truth's open boundary, with both boundaries' lengths. ``--mesh`` reads
+truth's open boundary, with both boundaries' lengths; where the mesh's open boundary lies (its
+length near the truth's rim, its close sheets, its junctions or elsewhere: a boundary away from
+the truth's rim is a slit or a hole a user sees); and the pieces of both. ``--mesh`` reads
 (or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
 """
 
@@ -97,6 +99,25 @@ def boundary_length(vertices, faces) -> float:
     topo = mesh_ops.edge_topology(faces)
     edges = topo.edges[topo.counts == 1]
     return float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).sum())
+
+
+def print_boundaries(pv, pf, tv, tf, points, kinds, spacing):
+    """The mesh's open boundary, its length (spacings) split by the kind of the truth sample
+    nearest each edge's midpoint (``kinds``: name -> mask over ``points``), and the pieces of
+    the mesh and the truth."""
+    topo = mesh_ops.edge_topology(pf)
+    edges = topo.edges[topo.counts == 1]
+    length = np.linalg.norm(pv[edges[:, 0]] - pv[edges[:, 1]], axis=1) / spacing
+    nearest = cKDTree(points).query((pv[edges[:, 0]] + pv[edges[:, 1]]) / 2, workers=-1)[1]
+    print("| mesh's open boundary (spacings) | all | "
+          + " | ".join(f"near the truth's {name}" for name in kinds) + " |")
+    print("|---|---:|" + "---:|" * len(kinds))
+    print(f"| length | {length.sum():.0f} | "
+          + " | ".join(f"{length[mask[nearest]].sum():.0f}" for mask in kinds.values()) + " |")
+    for name, (v, f) in (("truth", (tv, tf)), ("mesh", (pv, pf))):
+        count, label = mesh_ops.vertex_components(len(v), f)
+        faces = np.bincount(label, minlength=count)
+        print(f"{name}: {count} pieces, {int((faces < 100).sum())} of them under 100 faces")
 
 
 def print_rim_area(tv, tf, pv, pf, on_truth, on_pred, area_ratio, spacing):
@@ -173,6 +194,9 @@ def main():
         print(f"| {limit} spacing | {100 * miss.mean():.2f} % | "
               + " | ".join(f"{share:.2f} %" for share in shares) + " |")
     print_rim_area(tv, tf, pv, pf, points, on_pred[:SAMPLES], p_area / t_area, spacing)
+    print_boundaries(pv, pf, tv, tf, points, {"rim": rim, "close sheets": close,
+                                              "junctions": junction, "elsewhere": rest},
+                     spacing)
     off, nearest = cKDTree(points).query(on_pred[:SAMPLES], workers=-1)
     far = off / spacing > 1
     print(f"mesh farther than 1 spacing from the truth: {100 * far.mean():.2f} %; of the mesh, "

@@ -58,7 +58,7 @@ def main() -> None:
     shape, origin, spacing = grid_layout(points, args.resolution, band_radius)
     indices, nearest, owner = find_band(tree, points, shape, origin, spacing, band_radius,
                                         with_owner=True)
-    near = _network_nodes(tree, points, origin, indices, nearest, spacing)
+    near = _network_nodes(tree, points, nearest, owner, spacing)
     nodes, nearest = indices[near], nearest[near]
     queries = origin + nodes * spacing
     ridge = ridge_nodes(nodes, queries - points[owner[near]], spacing)

@@ -289,7 +289,7 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
 
     started = time.perf_counter()
     if use_network:
-        near = _network_nodes(tree, points, origin, indices, nearest, spacing)
+        near = _network_nodes(tree, points, nearest, owner, spacing)
         stats["network_queries"] = int(near.sum())
         values = nearest.astype(np.float32)
         # the radius lattice is anchored where the tiles of one reconstruction share a node
@@ -321,14 +321,14 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     return BandField(grid, stats)
 
 
-def _network_nodes(tree, points: np.ndarray, origin: np.ndarray, indices: np.ndarray,
-                   nearest: np.ndarray, spacing: float) -> np.ndarray:
-    """The band nodes that get the network's value (see ``NETWORK_BAND_NODES``)."""
+def _network_nodes(tree, points: np.ndarray, nearest: np.ndarray, owner: np.ndarray,
+                   spacing: float) -> np.ndarray:
+    """The band nodes that get the network's value (see ``NETWORK_BAND_NODES``): ``nearest``
+    and ``owner``, each node's nearest-point distance and that point (:func:`find_band`)."""
     near = nearest <= NETWORK_BAND_NODES * spacing
     gap = np.flatnonzero(~near & (nearest <= SPARSE_BAND_NODES * spacing))
     if len(gap) and len(points) > SPARSE_NEIGHBOUR:
-        _, owner = tree.query(origin + indices[gap] * spacing)
-        owners, which = np.unique(owner, return_inverse=True)
+        owners, which = np.unique(owner[gap], return_inverse=True)
         local, _ = tree.query(points[owners], k=[SPARSE_NEIGHBOUR + 1])
         near[gap] = nearest[gap] <= local[which.ravel(), 0]
     return near

@@ -232,7 +232,8 @@ def test_a_sparse_scan_is_meshed_without_holes_between_its_samples():
     for points, widened in ((sparse, True), (_lattice_square(0.5 / 128), False)):
         tree, h = cKDTree(points), 1 / 128
         shape, origin, _ = grid_layout(points, 128, 6 * h)
-        indices, nearest = find_band(tree, points, shape, origin, h, 6 * h)
-        asked = _network_nodes(tree, points, origin, indices, nearest, h)
+        indices, nearest, owner = find_band(tree, points, shape, origin, h, 6 * h,
+                                            with_owner=True)
+        asked = _network_nodes(tree, points, nearest, owner, h)
         three = nearest <= NETWORK_BAND_NODES * h
         assert (asked >= three).all() and (asked.sum() > three.sum()) == widened

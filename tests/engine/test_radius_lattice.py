@@ -74,7 +74,7 @@ def _band_offsets(points, spacing):
                                                None)
     indices, nearest, owner = field.find_band(tree, points, shape, origin, spacing,
                                               5 * spacing, with_owner=True)
-    near = field._network_nodes(tree, points, origin, indices, nearest, spacing)
+    near = field._network_nodes(tree, points, nearest, owner, spacing)
     positions = origin + indices[near] * spacing
     return indices[near], positions, positions - points[owner[near]]
 
