@@ -1,7 +1,7 @@
 """Where a reconstruction's area differs from the truth's: the true surface it misses, by cause.
 
     python benchmarks/area_breakdown.py DOMAIN CONDITION [--seed 1000000] [--radius-mode fixed]
-        [--resolution 256] [--mesh saved.npz]
+        [--resolution 256] [--mesh saved.npz] [--truth-udf]
 
 DOMAIN ``real`` takes the ``--seed``-th mesh of ``lab.bench.dataset.REAL_SHAPES`` (0-11).
 
@@ -27,6 +27,8 @@ truth's open boundary, with both boundaries' lengths; where the mesh's open boun
 length near the truth's rim, its close sheets, its junctions or elsewhere: a boundary away from
 the truth's rim is a slit or a hole a user sees); and the pieces of both. ``--mesh`` reads
 (or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
+``--truth-udf`` meshes the truth's exact distances on the same band instead of the network's
+(``lab.bench.truth_udf``): what the mesher makes of a perfect field.
 """
 
 import argparse
@@ -46,6 +48,7 @@ from engine.reconstruct import reconstruct  # noqa: E402
 from engine.sampling import sample_surface  # noqa: E402
 from lab.bench import dataset  # noqa: E402
 from lab.bench.harness import DEFAULT_CROP_MAX_DIST  # noqa: E402
+from lab.bench.truth_udf import make_truth_udf  # noqa: E402
 
 RIM = 3.0  # spacings
 JUNCTION = 4.0  # spacings from another part of the truth
@@ -143,6 +146,8 @@ def main():
     parser.add_argument("--radius-mode", default="fixed")
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--mesh", help="an .npz to read the reconstruction from, or write it to")
+    parser.add_argument("--truth-udf", action="store_true",
+                        help="mesh the truth's exact distances instead of the network's")
     args = parser.parse_args()
 
     truth = dataset.make_shape(args.domain, args.seed)
@@ -152,8 +157,11 @@ def main():
         pred = Mesh(saved["v"], saved["f"])
     else:
         start = time.perf_counter()
-        pred = reconstruct(np.asarray(cloud.points), {"resolution": args.resolution,
-                                                      "radius_mode": args.radius_mode}).mesh
+        if args.truth_udf:
+            pred = make_truth_udf(args.resolution)(cloud, truth)
+        else:
+            pred = reconstruct(np.asarray(cloud.points), {"resolution": args.resolution,
+                                                          "radius_mode": args.radius_mode}).mesh
         print(f"reconstructed in {time.perf_counter() - start:.0f} s")
         if args.mesh:
             np.savez(args.mesh, v=pred.vertices, f=pred.faces)
