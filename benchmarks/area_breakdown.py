@@ -25,7 +25,9 @@ ratio against the truth with its close sheets counted once (area x (1 - close sh
 where extra area lies: the mesh's and the truth's area within 1, 2, 4 and 8 spacings of the
 truth's open boundary, with both boundaries' lengths; where the mesh's open boundary lies (its
 length near the truth's rim, its close sheets, its junctions or elsewhere: a boundary away from
-the truth's rim is a slit or a hole a user sees); and the pieces of both. ``--mesh`` reads
+the truth's rim is a slit or a hole a user sees); the pieces of both; and the mesh's vertices
+standing more than 1 and 2 spacings off the truth (exact distances), grouped by the mesh's
+edges into clusters, with those on the open boundary (the tabs a render shows along a rim). ``--mesh`` reads
 (or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
 ``--truth-udf`` meshes the truth's exact distances on the same band instead of the network's
 (``lab.bench.truth_udf``): what the mesher makes of a perfect field.
@@ -123,6 +125,31 @@ def print_boundaries(pv, pf, tv, tf, points, kinds, spacing):
         print(f"{name}: {count} pieces, {int((faces < 100).sum())} of them under 100 faces")
 
 
+def print_standing_off(pv, pf, tv, tf, spacing):
+    """The mesh's vertices more than 1 and 2 spacings from the truth, and their clusters (joined
+    by the mesh's edges), those with a vertex on the open boundary counted apart."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from lab.bench.surface_distance import closest_on_mesh
+
+    off = closest_on_mesh(pv, tv, tf)[0] / spacing
+    topo = mesh_ops.edge_topology(pf)
+    on_boundary = np.zeros(len(pv), bool)
+    on_boundary[topo.edges[topo.counts == 1].reshape(-1)] = True
+    for limit in (1.0, 2.0):
+        far = off > limit
+        edges = topo.edges[far[topo.edges[:, 0]] & far[topo.edges[:, 1]]]
+        graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])),
+                           shape=(len(pv), len(pv)))
+        label = connected_components(graph, directed=False)[1]
+        clusters = np.unique(label[far])
+        rim = np.unique(label[far & on_boundary])
+        unit = "spacing" if limit == 1 else "spacings"
+        print(f"mesh vertices more than {limit:g} {unit} off the truth: {int(far.sum())}, in "
+              f"{len(clusters)} clusters, {len(rim)} of them on the open boundary")
+
+
 def print_rim_area(tv, tf, pv, pf, on_truth, on_pred, area_ratio, spacing):
     """The mesh's and the truth's area near the truth's open boundary, as shares of the truth's
     area (``on_truth``, ``on_pred``: uniform samples of each; the mesh's share is scaled by
@@ -205,6 +232,7 @@ def main():
     print_boundaries(pv, pf, tv, tf, points, {"rim": rim, "close sheets": close,
                                               "junctions": junction, "elsewhere": rest},
                      spacing)
+    print_standing_off(pv, pf, tv, tf, spacing)
     off, nearest = cKDTree(points).query(on_pred[:SAMPLES], workers=-1)
     far = off / spacing > 1
     print(f"mesh farther than 1 spacing from the truth: {100 * far.mean():.2f} %; of the mesh, "
