@@ -30,7 +30,6 @@ from collections import deque
 
 import numpy as np
 
-from engine.geometry import Mesh
 from engine.meshing import mesh_ops
 
 JOIN_AHEAD = 2.0  # voxels: the farthest a sheet ahead of a boundary vertex is joined
@@ -218,35 +217,13 @@ def _path(neighbours, source: int, goal: int):
 
 
 def main():
-    import argparse
+    from lab.experiment import report, reconstructed_test_shape
 
-    from engine.geometry import PointCloud
-    from engine.metrics import evaluate
-    from engine.reconstruct import reconstruct
-    from engine.settings import ReconstructSettings
-    from lab.bench import dataset
-
-    parser = argparse.ArgumentParser(description="The junction join on a benchmark test shape.")
-    parser.add_argument("domain", choices=dataset.DOMAINS)
-    parser.add_argument("--seed", type=int, default=1_000_000)
-    parser.add_argument("--resolution", type=int, default=256)
-    args = parser.parse_args()
-    truth = dataset.make_shape(args.domain, args.seed)
-    cloud = dataset.make_input(truth, args.domain, "clean", args.seed)
-    mesh = reconstruct(PointCloud(cloud.points),
-                       ReconstructSettings(resolution=args.resolution, device="cpu")).mesh
-    spacing = 1.0 / args.resolution
+    truth, mesh, spacing = reconstructed_test_shape("The junction join on a benchmark test shape.")
     vertices, faces, joined = join_junctions(mesh.vertices, mesh.faces, spacing)
-    print(f"{args.domain} {args.seed}: {joined} boundary edges joined")
-    for name, (v, f) in (("mesh", (mesh.vertices, mesh.faces)), ("joined", (vertices, faces))):
-        topo = mesh_ops.edge_topology(f)
-        open_edges = topo.edges[topo.counts == 1]
-        boundary = np.linalg.norm(v[open_edges[:, 0]] - v[open_edges[:, 1]], axis=1).sum()
-        scores = evaluate(Mesh(v, f), truth)
-        print(f"{name}: {mesh_ops.vertex_components(len(v), f)[0]} pieces, open boundary "
-              f"{boundary / spacing:.0f} spacings, CD x 10^2 {scores['cd_l1_x100']:.4f}, "
-              f"F1@0.005 {scores['f1_0.005']:.4f}, NC {scores['nc']:.4f}, double "
-              f"{100 * scores['double_layer']:.2f} %, area ratio {scores['area_ratio']:.4f}")
+    print(f"{joined} boundary edges joined")
+    report("mesh", mesh.vertices, mesh.faces, truth, spacing)
+    report("joined", vertices, faces, truth, spacing)
 
 
 if __name__ == "__main__":

@@ -85,34 +85,11 @@ def smooth_rims(vertices: np.ndarray, faces: np.ndarray, rounds: int = ROUNDS) -
 
 
 def main():
-    import argparse
+    from lab.experiment import report, reconstructed_test_shape
 
-    from engine.geometry import Mesh, PointCloud
-    from engine.metrics import evaluate
-    from engine.reconstruct import reconstruct
-    from engine.settings import ReconstructSettings
-    from lab.bench import dataset
-
-    parser = argparse.ArgumentParser(description="Rim smoothing on a benchmark test shape.")
-    parser.add_argument("domain", choices=dataset.DOMAINS)
-    parser.add_argument("--seed", type=int, default=1_000_000)
-    parser.add_argument("--resolution", type=int, default=256)
-    args = parser.parse_args()
-    truth = dataset.make_shape(args.domain, args.seed)
-    cloud = dataset.make_input(truth, args.domain, "clean", args.seed)
-    mesh = reconstruct(PointCloud(cloud.points),
-                       ReconstructSettings(resolution=args.resolution, device="cpu")).mesh
-    spacing = 1.0 / args.resolution
-    smoothed = smooth_rims(mesh.vertices, mesh.faces)
-    topo = mesh_ops.edge_topology(mesh.faces)
-    boundary = topo.edges[topo.counts == 1]
-    for name, v in (("mesh", mesh.vertices), ("smoothed", smoothed)):
-        length = np.linalg.norm(v[boundary[:, 0]] - v[boundary[:, 1]], axis=1).sum()
-        scores = evaluate(Mesh(v, mesh.faces), truth)
-        print(f"{name}: open boundary {length / spacing:.0f} spacings, CD x 10^2 "
-              f"{scores['cd_l1_x100']:.4f}, F1@0.005 {scores['f1_0.005']:.4f}, NC "
-              f"{scores['nc']:.4f}, double {100 * scores['double_layer']:.2f} %, area ratio "
-              f"{scores['area_ratio']:.4f}")
+    truth, mesh, spacing = reconstructed_test_shape("Rim smoothing on a benchmark test shape.")
+    report("mesh", mesh.vertices, mesh.faces, truth, spacing)
+    report("smoothed", smooth_rims(mesh.vertices, mesh.faces), mesh.faces, truth, spacing)
 
 
 if __name__ == "__main__":
