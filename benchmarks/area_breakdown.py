@@ -27,8 +27,8 @@ truth's open boundary, with both boundaries' lengths; where the mesh's open boun
 length near the truth's rim, its close sheets, its junctions or elsewhere: a boundary away from
 the truth's rim is a slit or a hole a user sees); the pieces of both; and the mesh's vertices
 standing more than 1 and 2 spacings off the truth (exact distances), grouped by the mesh's
-edges into clusters, with those on the open boundary (the tabs a render shows along a rim). ``--mesh`` reads
-(or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
+edges into clusters, with those on the open boundary (the tabs a render shows along a rim).
+``--mesh`` reads (or, the first time, writes) the reconstruction as an ``.npz`` with ``v`` and ``f``.
 ``--truth-udf`` meshes the truth's exact distances on the same band instead of the network's
 (``lab.bench.truth_udf``): what the mesher makes of a perfect field.
 """

@@ -71,7 +71,8 @@ def join_junctions(vertices: np.ndarray, faces: np.ndarray, spacing: float):
     both = (target[a] >= 0) & (target[b] >= 0)
     if not both.any():
         return vertices, faces, 0
-    neighbours = _neighbours(len(x), topo.edges)
+    adjacency = mesh_ops.uniform_laplacian(len(x), topo.edges)  # its pattern: the neighbours
+    neighbours = adjacency.indptr, adjacency.indices
     row = np.full(len(x), -1, np.int64)
     row[rim.vertices] = np.arange(len(rim.vertices))
     new, firsts, paths = [], [], []
@@ -179,15 +180,6 @@ def _targets(x, faces, normals, cents, tree, rim) -> np.ndarray:
     nearest = np.argmin(np.linalg.norm(x[corners] - cross[:, None], axis=2), axis=1)
     target[rim.vertices[rows]] = corners[np.arange(len(rows)), nearest]
     return target
-
-
-def _neighbours(n: int, edges: np.ndarray):
-    """Each vertex's neighbours along the edges, as CSR arrays (pointers, indices)."""
-    both = np.r_[edges, edges[:, ::-1]]
-    order = np.argsort(both[:, 0], kind="stable")
-    both = both[order]
-    pointers = np.searchsorted(both[:, 0], np.arange(n + 1))
-    return pointers, both[:, 1]
 
 
 def _path(neighbours, source: int, goal: int):
