@@ -41,6 +41,7 @@ from typing import Dict, Optional, Union
 
 import numpy as np
 
+from .compiled import kernels as load_kernels
 from .weights_file import read_weights, save_weights
 
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "backbone.npz"
@@ -151,11 +152,21 @@ def max_over_points(x: np.ndarray) -> np.ndarray:
     """(B, N, C) -> (B, C): the maximum over axis 1, by halving (two halves at a time,
     overlapping by one row when N is odd: max is idempotent). Exact; each step is one
     element-wise maximum over long contiguous runs, where numpy's reduction over a middle axis
-    loops row by row."""
+    loops row by row. :func:`max_pool` gives the compiled loop instead where it can."""
     while x.shape[1] > 1:
         half = (x.shape[1] + 1) // 2
         x = np.maximum(x[:, :half], x[:, x.shape[1] - half:])
     return x[:, 0]
+
+
+def max_pool():
+    """The max pool over a patch's points for the networks' forward passes: the compiled loop
+    (:mod:`.network_kernels`, the same values) where numba is there, else
+    :func:`max_over_points`. Call it where the network is built, on the thread that builds it:
+    the kernel is loaded there (compiled on a machine's first run), not inside the forward
+    passes' threads. The compiled loop takes C-contiguous float32 activations only."""
+    compiled = load_kernels("network_kernels")  # compiled (or read from the cache) on import
+    return max_over_points if compiled is None else compiled.max_over_points
 
 
 class _Zeros:
@@ -201,6 +212,7 @@ class NumpyBackbone:
         h0 = p["head0.weight"]
         ctx = 2 * hdim + self.config["heads"] * hdim
         self.head0 = (h0[:2 * hdim], h0[2 * hdim:ctx], h0[ctx:])
+        self.max_pool = max_pool()
 
     def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
         y = x @ self.p[name + ".weight"]
@@ -229,7 +241,7 @@ class NumpyBackbone:
         t = x.reshape(b * n, 5) @ self.enc0                              # enc0 with its bias
         relu_(t)
         h1 = self._linear(t, "enc1")                                     # (b*n, H)
-        g1 = max_over_points(h1.reshape(b, n, hdim))
+        g1 = self.max_pool(h1.reshape(b, n, hdim))
         np.maximum(h1, ZEROS.like(h1), out=t)
         u = t @ p["enc2a.weight"]
         u = u.reshape(b, n, hdim)
@@ -241,7 +253,7 @@ class NumpyBackbone:
         h2 = h2.reshape(b, n, hdim)
         m = mask.astype(np.float32)
         count = m.sum(axis=1, keepdims=True)
-        pmax = max_over_points(h2)
+        pmax = self.max_pool(h2)
         pmean = np.matmul(m[:, None, :], h2)[:, 0, :] / count
         w = self.query0
         query = pmax @ w[0]

@@ -32,7 +32,7 @@ from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
-from .backbone import ZEROS, max_over_points, relu_
+from .backbone import ZEROS, max_pool, relu_
 from .cpu_threads import run_in_threads
 from .patch_roughness import ROUGHNESS_FEATURES, patch_roughness
 from .patches import (QUERY_CHUNK, Neighbours, groups_by_count, nearest_within,
@@ -134,6 +134,7 @@ class NumpySelector:
         pos = np.vstack([params["pos.weight"].T, params["pos.bias"][None]]).astype(np.float64)
         shortcut = pos @ params["block0.shortcut.weight"].T.astype(np.float64)
         self.pos = np.hstack([pos, shortcut]).astype(np.float32)
+        self.max_pool = max_pool()
 
     def _linear(self, x, name, bias=True):
         y = x @ self.p[name + ".weight"]
@@ -184,9 +185,9 @@ class NumpySelector:
         x[:, 3] = 1.0
         net = self._first_block(x).reshape(b, n, h)                       # (b, n, H)
         for k in range(1, self.config["blocks"]):
-            pooled = max_over_points(net)                                # (b, H)
+            pooled = self.max_pool(net)                                # (b, H)
             net = self._pooled_block(net, pooled, f"block{k}")            # (b, n, H)
-        pooled = max_over_points(net)
+        pooled = self.max_pool(net)
         code = self._linear(np.maximum(pooled, ZEROS.like(pooled)), "code")   # (b, 256)
         extra = (extra - self.p["extra_mean"]) * self.p["extra_scale"]
         z = np.concatenate([code, extra], axis=1)

@@ -159,3 +159,30 @@ def test_fewer_rows_than_max_points(weights):
         t = bb.load_backbone_torch(weights)
         a = t(torch.from_numpy(rel[:, :3]), torch.from_numpy(mask[:, :3])).numpy()
     np.testing.assert_allclose(a, net.predict(rel, mask), atol=1e-5, rtol=1e-5)
+
+
+def test_compiled_max_pool_and_forward_pass_equal_numpy_ones(weights, monkeypatch):
+    """The compiled pool gives numpy's halving maxima exactly (NaN included), and the networks
+    built with it (numba installed, as the requirements have it) give the same bits."""
+    from engine.compiled import kernels
+    from engine.selector import load_selector_numpy
+
+    compiled = kernels("network_kernels")
+    assert compiled is not None
+    rng = np.random.default_rng(11)
+    for points in (1, 2, 7, 64):
+        x = rng.standard_normal((33, points, 64)).astype(np.float32)
+        x[3, points // 2, 5] = np.nan
+        assert np.array_equal(compiled.max_over_points(x), bb.max_over_points(x),
+                              equal_nan=True)
+    rel, mask = random_patches(300, 12)
+    net = bb.load_backbone_numpy(weights)
+    radius = load_selector_numpy()
+    extra = rng.random((300, radius.p["extra_mean"].shape[-1])).astype(np.float32)
+    assert net.max_pool is compiled.max_over_points
+    got = net.predict(rel, mask), radius.predict_unit(rel, mask, extra)
+    monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
+    numpy_net, numpy_radius = bb.load_backbone_numpy(weights), load_selector_numpy()
+    assert numpy_net.max_pool is bb.max_over_points
+    assert np.array_equal(got[0], numpy_net.predict(rel, mask))
+    assert np.array_equal(got[1], numpy_radius.predict_unit(rel, mask, extra))
