@@ -23,7 +23,7 @@ DEPENDENCIES = (
     ("skimage", "scikit-image", "marching cubes", True),
     ("laspy", "laspy", "reading LAS/LAZ scans (optional)", False),
     ("trimesh", "trimesh", "STL and glTF files in batch runs (optional)", False),
-    ("numba", "numba", "a faster mesher on the CPU (optional)", False),
+    ("numba", "numba", "a faster mesher and network on the CPU (optional)", False),
     ("torch", "torch", "computing on an NVIDIA GPU (optional)", False),
 )
 
