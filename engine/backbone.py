@@ -169,6 +169,29 @@ def max_pool():
     return max_over_points if compiled is None else compiled.max_over_points
 
 
+def _bias_pool_relu(h: np.ndarray, bias: np.ndarray, relu_out: np.ndarray) -> np.ndarray:
+    """``h += bias``; ``relu_out = max(h, 0)``; the max pool of ``h``. (B, N, C) float32; the
+    numpy form of :func:`.network_kernels.bias_pool_relu`."""
+    h += bias
+    np.maximum(h, ZEROS.like(h), out=relu_out)
+    return max_over_points(h)
+
+
+def _add_patch_relu(u: np.ndarray, per_patch: np.ndarray) -> None:
+    """``u = max(u + per_patch[:, None, :], 0)`` in place; :func:`.network_kernels.add_patch_relu`
+    in numpy."""
+    u += per_patch[:, None, :]
+    relu_(u)
+
+
+def _bias_residual_pool(h: np.ndarray, bias: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """``h = h + bias + residual`` in place; the max pool of ``h``;
+    :func:`.network_kernels.bias_residual_pool` in numpy."""
+    h += bias
+    h += residual
+    return max_over_points(h)
+
+
 class _Zeros:
     """A shared read-only buffer of float32 zeros for ReLUs: ``np.maximum(x, 0)`` takes numpy's
     scalar-broadcast loop, which is not vectorised; ``np.maximum(x, zeros)`` with an array of
@@ -213,6 +236,11 @@ class NumpyBackbone:
         ctx = 2 * hdim + self.config["heads"] * hdim
         self.head0 = (h0[:2 * hdim], h0[2 * hdim:ctx], h0[ctx:])
         self.max_pool = max_pool()
+        # the per-point steps after the encoder's products: compiled where numba is there
+        compiled = load_kernels("network_kernels")
+        self.steps = ((_bias_pool_relu, _add_patch_relu, _bias_residual_pool) if compiled is None
+                      else (compiled.bias_pool_relu, compiled.add_patch_relu,
+                            compiled.bias_residual_pool))
 
     def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
         y = x @ self.p[name + ".weight"]
@@ -238,22 +266,17 @@ class NumpyBackbone:
         np.sqrt(np.einsum("bnk,bnk->bn", rel, rel), out=dist)
         x[..., 4] = 1.0
         geo = geometric_features_np(rel, mask, cfg, dist)
+        bias_pool_relu, add_patch_relu, bias_residual_pool = self.steps
         t = x.reshape(b * n, 5) @ self.enc0                              # enc0 with its bias
         relu_(t)
-        h1 = self._linear(t, "enc1")                                     # (b*n, H)
-        g1 = self.max_pool(h1.reshape(b, n, hdim))
-        np.maximum(h1, ZEROS.like(h1), out=t)
-        u = t @ p["enc2a.weight"]
-        u = u.reshape(b, n, hdim)
-        u += (g1 @ p["enc2b.weight"] + p["enc2b.bias"])[:, None, :]
-        relu_(u)
-        h2 = np.matmul(u.reshape(b * n, hdim), p["enc3.weight"], out=t)
-        h2 += p["enc3.bias"]
-        h2 += h1
-        h2 = h2.reshape(b, n, hdim)
+        h1 = (t @ p["enc1.weight"]).reshape(b, n, hdim)                  # enc1 (bias below)
+        g1 = bias_pool_relu(h1, p["enc1.bias"], t.reshape(b, n, hdim))  # t = relu(h1)
+        u = (t @ p["enc2a.weight"]).reshape(b, n, hdim)
+        add_patch_relu(u, g1 @ p["enc2b.weight"] + p["enc2b.bias"])
+        h2 = np.matmul(u.reshape(b * n, hdim), p["enc3.weight"], out=t).reshape(b, n, hdim)
+        pmax = bias_residual_pool(h2, p["enc3.bias"], h1)               # h2 += bias + h1
         m = mask.astype(np.float32)
         count = m.sum(axis=1, keepdims=True)
-        pmax = self.max_pool(h2)
         pmean = np.matmul(m[:, None, :], h2)[:, 0, :] / count
         w = self.query0
         query = pmax @ w[0]

@@ -162,8 +162,9 @@ def test_fewer_rows_than_max_points(weights):
 
 
 def test_compiled_max_pool_and_forward_pass_equal_numpy_ones(weights, monkeypatch):
-    """The compiled pool gives numpy's halving maxima exactly (NaN included), and the networks
-    built with it (numba installed, as the requirements have it) give the same bits."""
+    """The compiled pool and per-point steps give numpy's values exactly (NaN included), and the
+    networks built with them (numba installed, as the requirements have it) give the same
+    bits."""
     from engine.compiled import kernels
     from engine.selector import load_selector_numpy
 
@@ -175,14 +176,31 @@ def test_compiled_max_pool_and_forward_pass_equal_numpy_ones(weights, monkeypatc
         x[3, points // 2, 5] = np.nan
         assert np.array_equal(compiled.max_over_points(x), bb.max_over_points(x),
                               equal_nan=True)
+        bias = rng.standard_normal(64).astype(np.float32)
+        other = rng.standard_normal(x.shape).astype(np.float32)
+        numpy_x, numpy_relu, compiled_relu = x.copy(), np.empty_like(x), np.empty_like(x)
+        assert np.array_equal(compiled.bias_pool_relu(x, bias, compiled_relu),
+                              bb._bias_pool_relu(numpy_x, bias, numpy_relu), equal_nan=True)
+        assert np.array_equal(x, numpy_x, equal_nan=True)
+        assert np.array_equal(compiled_relu, numpy_relu, equal_nan=True)
+        assert not np.signbit(compiled_relu[compiled_relu == 0]).any()  # +0, as np.maximum
+        per_patch = rng.standard_normal((33, 64)).astype(np.float32)
+        compiled.add_patch_relu(x, per_patch)
+        bb._add_patch_relu(numpy_x, per_patch)
+        assert np.array_equal(x, numpy_x, equal_nan=True)
+        assert np.array_equal(compiled.bias_residual_pool(x, bias, other),
+                              bb._bias_residual_pool(numpy_x, bias, other), equal_nan=True)
+        assert np.array_equal(x, numpy_x, equal_nan=True)
     rel, mask = random_patches(300, 12)
     net = bb.load_backbone_numpy(weights)
     radius = load_selector_numpy()
     extra = rng.random((300, radius.p["extra_mean"].shape[-1])).astype(np.float32)
     assert net.max_pool is compiled.max_over_points
+    assert net.steps[0] is compiled.bias_pool_relu
     got = net.predict(rel, mask), radius.predict_unit(rel, mask, extra)
     monkeypatch.setenv("UDF_RECON_KERNELS", "numpy")
     numpy_net, numpy_radius = bb.load_backbone_numpy(weights), load_selector_numpy()
     assert numpy_net.max_pool is bb.max_over_points
+    assert numpy_net.steps[0] is bb._bias_pool_relu
     assert np.array_equal(got[0], numpy_net.predict(rel, mask))
     assert np.array_equal(got[1], numpy_radius.predict_unit(rel, mask, extra))
