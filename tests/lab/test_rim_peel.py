@@ -42,3 +42,24 @@ def test_below_the_threshold_or_away_from_the_boundary_nothing_goes():
     assert np.array_equal(peel_unconverged(faces, field, 0.3), faces)
     field[:] = 0.9  # all of it stalled: eaten ring by ring, PASSES rings at most
     assert 0 < len(peel_unconverged(faces, field, 0.3, passes=2)) < len(faces)
+
+
+def test_projection_puts_a_stalled_rim_back_on_the_zero_level():
+    from engine.frame import UnitFrame
+    from engine.meshing import extract_surface, mesh_ops
+    from lab import analytic as A
+    from lab.rim_peel import project_unconverged
+
+    field = A.sample_grid(A.disk((0, 0, 0), 0.3), [-0.5] * 3, [0.5] * 3, 64, exact=False)
+    mesh = extract_surface(field).mesh
+    v, f = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces)
+    topo = mesh_ops.edge_topology(f)
+    rim = np.unique(topo.edges[topo.counts == 1])
+    lifted = v.copy()
+    lifted[rim, 2] += 1.5 * field.spacing  # the rim stalled off the disk
+    moved = project_unconverged(lifted, f, field, UnitFrame(np.zeros(3), 1.0), 0.3)
+    assert np.abs(lifted[rim, 2]).min() > 1.4 * field.spacing
+    assert np.abs(moved[rim, 2]).max() < 0.25 * field.spacing
+    low = field.closest(lifted)[0] <= 0.3 * field.spacing  # on the zero level: left alone
+    assert low.sum() > 0.8 * len(v)
+    assert np.array_equal(moved[low], lifted[low])
