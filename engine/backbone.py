@@ -165,8 +165,18 @@ def max_pool():
     :func:`max_over_points`. Call it where the network is built, on the thread that builds it:
     the kernel is loaded there (compiled on a machine's first run), not inside the forward
     passes' threads. The compiled loop takes C-contiguous float32 activations only."""
+    return network_steps()[0]
+
+
+def network_steps():
+    """``(max_pool, bias_pool_relu, add_patch_relu, bias_residual_pool)``: the compiled loops of
+    :mod:`.network_kernels` where numba is there, else their numpy forms (the same values).
+    Called where a network is built, as :func:`max_pool`."""
     compiled = load_kernels("network_kernels")  # compiled (or read from the cache) on import
-    return max_over_points if compiled is None else compiled.max_over_points
+    if compiled is None:
+        return max_over_points, _bias_pool_relu, _add_patch_relu, _bias_residual_pool
+    return (compiled.max_over_points, compiled.bias_pool_relu, compiled.add_patch_relu,
+            compiled.bias_residual_pool)
 
 
 def _bias_pool_relu(h: np.ndarray, bias: np.ndarray, relu_out: np.ndarray) -> np.ndarray:
@@ -235,12 +245,9 @@ class NumpyBackbone:
         h0 = p["head0.weight"]
         ctx = 2 * hdim + self.config["heads"] * hdim
         self.head0 = (h0[:2 * hdim], h0[2 * hdim:ctx], h0[ctx:])
-        self.max_pool = max_pool()
-        # the per-point steps after the encoder's products: compiled where numba is there
-        compiled = load_kernels("network_kernels")
-        self.steps = ((_bias_pool_relu, _add_patch_relu, _bias_residual_pool) if compiled is None
-                      else (compiled.bias_pool_relu, compiled.add_patch_relu,
-                            compiled.bias_residual_pool))
+        # the max pool, and the per-point steps after the encoder's products: compiled where
+        # numba is there
+        self.max_pool, *self.steps = network_steps()
 
     def _linear(self, x: np.ndarray, name: str) -> np.ndarray:
         y = x @ self.p[name + ".weight"]
