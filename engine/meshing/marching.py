@@ -19,6 +19,7 @@ from . import mesh_ops
 
 SLAB = 64  # nodes per slab along x
 SMALL_COMPONENT = 32  # faces; smaller closed pieces of the cover count as fragments
+FRAGMENT_SHARE = 0.02  # a cover whose fragments hold more of its faces than this is shredded
 MAX_ISO = 2.0  # voxels; the automatic iso never goes above this
 
 
@@ -26,9 +27,12 @@ MAX_ISO = 2.0  # voxels; the automatic iso never goes above this
 class CoverReport:
     """What the r-surface looks like.
 
-    components: closed pieces; small: pieces with fewer than ``SMALL_COMPONENT`` faces;
-    handles: total genus of the pieces (tunnels through a pancake mean r is too small);
-    fragmented: ``small + handles`` is large, the cover is not a clean double cover.
+    components: closed pieces; small: pieces with fewer than ``SMALL_COMPONENT`` faces (the
+    crumbs a noisy field leaves, which the clean-up drops); handles: total genus of the pieces
+    (tunnels through a pancake: holes in the surface, or two sheets whose covers touch);
+    fragmented: the small pieces hold more than ``FRAGMENT_SHARE`` of the cover's faces, so r is
+    too small for the field's noise. Handles do not count: close sheets, a garment's bands and a
+    car's touching parts give a cover real ones at every r.
     """
 
     components: int
@@ -115,8 +119,9 @@ def cover_report(faces: np.ndarray) -> CoverReport:
     nv = np.bincount(vert_label[used], minlength=count)
     chi = nv - ne + nf
     handles = int(np.maximum((2 - chi) // 2, 0).sum())
-    small = int(np.sum(nf < SMALL_COMPONENT))
-    return CoverReport(int(count), small, handles, small + handles > 10)
+    small = nf < SMALL_COMPONENT
+    shredded = nf[small].sum() > FRAGMENT_SHARE * len(faces)
+    return CoverReport(int(count), int(small.sum()), handles, bool(shredded))
 
 
 def double_cover(field, iso: Optional[float] = None, progress: Optional[ProgressFn] = None,
