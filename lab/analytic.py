@@ -92,6 +92,30 @@ def rectangle(center=(0.0, 0.0, 0.0), u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 0.0),
     return fn
 
 
+def perforated_plate(center=(0.0, 0.0, 0.0), half: float = 0.35, holes: int = 4,
+                     hole_radius: float = 0.05) -> Shape:
+    """A square plate in the plane ``z = center[2]`` (side ``2 half``) with ``holes x holes``
+    round holes of ``hole_radius`` on a regular grid: a grille. Its double cover has a handle
+    through every hole."""
+    c = np.asarray(center, dtype=np.float64)
+    pitch = 2.0 * half / holes
+    centres = -half + pitch * (np.arange(holes) + 0.5)
+
+    def fn(p):
+        q = p - c
+        flat = np.clip(q[:, :2], -half, half)  # the nearest point of the square, holes aside
+        cell = np.clip(np.floor((flat + half) / pitch), 0, holes - 1).astype(int)
+        hole = np.stack([centres[cell[:, 0]], centres[cell[:, 1]]], axis=1)
+        offset = flat - hole
+        rho = np.linalg.norm(offset, axis=1, keepdims=True)
+        inside = rho[:, 0] < hole_radius  # the nearest point is on the hole's rim instead
+        rim = hole + offset * (hole_radius / np.maximum(rho, 1e-12))
+        flat = np.where(inside[:, None], rim, flat)
+        closest = np.column_stack([flat, np.zeros(len(p))]) + c
+        return _result(p, closest)
+    return fn
+
+
 def union(*shapes: Shape) -> Shape:
     """The union of several shapes: the nearest of their closest points."""
 

@@ -133,8 +133,10 @@ def double_cover(field, iso: Optional[float] = None, progress: Optional[Progress
     field : UDFGrid
     iso : float or None
         World units. ``None``: start at ``max(1.0 h, min(d) + 0.5 h)`` and raise it (x1.25, up
-        to 2 h) while the cover fragments. A given value is used as is (a warning when the
-        cover fragments).
+        to 2 h) while the cover is shredded (:class:`CoverReport`: its crumbs hold more than
+        ``FRAGMENT_SHARE`` of its faces). Handles do not raise it: a larger r merges the covers of
+        sheets up to 2 r apart and closes holes narrower than r. A given value is used as is (a
+        warning when the cover is shredded).
 
     Returns
     -------
