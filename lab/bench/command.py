@@ -83,6 +83,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--meshes", default=None,
                         help="a folder where each predicted mesh is saved (one .npz per shape), "
                              "for --rescore")
+    parser.add_argument("--fields", default=None,
+                        help="ours: a folder where each shape's distance field is kept; a later "
+                             "run with the same input, settings and field code (the engine "
+                             "outside engine/meshing) meshes the kept field instead of computing "
+                             "it, so a mesher change is measured at the mesher's cost (those "
+                             "shapes' seconds and memory are left out of the means)")
     parser.add_argument("--rescore", action="store_true",
                         help="run nothing: score again, under today's protocol, every result in "
                              "--out of the selected domains and conditions from the meshes its "
@@ -120,6 +126,8 @@ def _factory(args, name: str, radius_mode: str, radius=None):
             if radius is not None:
                 options["radius"] = radius
             options["fill_gaps"] = bool(args.fill_gaps)
+            if args.fields:
+                options["fields"] = args.fields
     return functools.partial(make_method, name, **options)
 
 

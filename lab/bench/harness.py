@@ -11,7 +11,9 @@ and counted, never skipped; an output without faces is scored the same way and c
 What is measured
 ----------------
 * ``seconds``: wall-clock time of the method call only (not building the shape, not scoring);
-  ``cpu_seconds``: process CPU time over the same span.
+  ``cpu_seconds``: process CPU time over the same span. A shape whose field was read from
+  disk (``field_from_cache``, ``--fields``) was timed for its meshing alone: the summary's
+  time and memory leave it out.
 * ``peak_rss_mb``: the process's peak resident set size (``VmHWM``) while the method ran. The
   peak is reset before each call by writing ``5`` to ``/proc/self/clear_refs``, so native
   allocations (Open3D, torch, numpy) count and earlier shapes do not. It includes the
@@ -333,6 +335,8 @@ def _run_shape(method: Callable, dataset, shape_seed: int, domain: str, conditio
         seconds = time.perf_counter() - start
     row.update(seconds=seconds, cpu_seconds=time.process_time() - cpu_start,
                peak_rss_mb=memory.peak_mb, peak_delta_mb=memory.delta_mb)
+    if pred is not None and getattr(method, "field_from_cache", False):
+        row["field_from_cache"] = True  # its time and memory are the mesher's alone
     if pred is None:
         row.update(_worst_scores(), empty=True, pred_faces=0)
     else:
@@ -483,7 +487,8 @@ def summarize(rows: Sequence[dict]) -> dict:
         shapes (None when none), ``cd_l1_x100_all``: mean over all shapes (inf when any shape has
         no surface); F-scores and ``nc``: means over all shapes, a shape without surface counting
         0; ``seconds``: mean wall seconds per shape; ``peak_rss_mb``: the largest per-shape peak;
-        ``peak_delta_mb``: the largest per-shape increase.
+        ``peak_delta_mb``: the largest per-shape increase. The last three leave out the shapes
+        whose field was read from disk (``field_from_cache``: :mod:`.field_cache`).
     """
     scored = [row for row in rows if not row["empty"]]
     summary = {
@@ -500,9 +505,10 @@ def summarize(rows: Sequence[dict]) -> dict:
     for key in LAYER_KEYS:  # rows scored before these metrics existed have none
         values = [row[key] for row in scored if row.get(key) is not None]
         summary[key] = _mean(values) if len(values) == len(scored) else None
-    summary["seconds"] = _mean([row["seconds"] for row in rows])
-    summary["peak_rss_mb"] = max((row["peak_rss_mb"] for row in rows), default=None)
-    summary["peak_delta_mb"] = max((row["peak_delta_mb"] for row in rows), default=None)
+    timed = [row for row in rows if not row.get("field_from_cache")]
+    summary["seconds"] = _mean([row["seconds"] for row in timed])
+    summary["peak_rss_mb"] = max((row["peak_rss_mb"] for row in timed), default=None)
+    summary["peak_delta_mb"] = max((row["peak_delta_mb"] for row in timed), default=None)
     return summary
 
 

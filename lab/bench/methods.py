@@ -110,7 +110,8 @@ def _reconstruct_function():
 
 
 def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "auto",
-              udf_source: str = None, fill_gaps: bool = False, **settings) -> Method:
+              udf_source: str = None, fill_gaps: bool = False, fields: str = None,
+              **settings) -> Method:
     """Our reconstruction: :func:`engine.reconstruct.reconstruct` with the given settings.
 
     Parameters
@@ -121,6 +122,9 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
     udf_source : None (the engine's default, the network) or ``"nearest"``
     fill_gaps : the engine's gap fill; off unless asked for (the engine's default is on), so
         that a result's name (``-gaps``) says which it is
+    fields : a folder where each shape's distance field is kept and, on a later call with the
+        same points, settings and field code, read back (:mod:`.field_cache`); the callable's
+        ``field_from_cache`` then says whether its last mesh came from a kept field
     **settings : further :class:`engine.settings.ReconstructSettings` fields
 
     Returns
@@ -151,7 +155,16 @@ def make_ours(radius_mode: str = "fixed", resolution: int = 256, device: str = "
         options["udf_source"] = udf_source
 
     def ours(cloud: PointCloud) -> Mesh:
-        return reconstruct(cloud, config, None, None, **options).mesh
+        if fields is None:
+            return reconstruct(cloud, config, None, None, **options).mesh
+        from .field_cache import kept_fields
+
+        with kept_fields(fields):
+            result = reconstruct(cloud, config, None, None, **options)
+        ours.field_from_cache = bool(result.stats.get("from_cache"))
+        return result.mesh
+
+    ours.field_from_cache = False
 
     if udf_source == "nearest":
         ours.__name__ = "nearest-udf"
