@@ -46,7 +46,7 @@ def main(argv=None) -> None:
     frame = UnitFrame.from_points(points)
     unit = frame.to_unit(points)
     grid = compute_udf_band(unit, ReconstructSettings(resolution=args.resolution,
-                                                      fill_gaps=False)).grid
+                                                      fill_gaps=False, radius_mode="fixed")).grid
     nodes, field = grid.band()
     where = grid.index_to_world(nodes)
     nearest, _ = cKDTree(unit).query(where, workers=-1)

@@ -47,7 +47,7 @@ def main() -> None:
     for name, points in clouds(args.count):
         points = UnitFrame.from_points(points).to_unit(points)
         band = compute_udf_band(points, ReconstructSettings(resolution=args.resolution,
-                                                            fill_gaps=False),
+                                                            fill_gaps=False, radius_mode="fixed"),
                                 udf_source="nearest")
         grid = band.grid
         indices, values = grid.band()

@@ -105,7 +105,8 @@ class BandField:
         time, as the batches run on several threads at once), ``seconds_parent_ball`` (the
         part of ``seconds_radius`` spent on the parent ball's neighbour search, whose lists
         also give the backbone its patches), ``gap_nodes`` and ``seconds_gap_fill`` (the nodes
-        the gap fill set and its part of ``seconds_udf``).
+        the gap fill set and its part of ``seconds_udf``; the gaps are looked for with the fill
+        off too), ``open_gap_nodes`` (with the fill off, the nodes it would have set).
     """
 
     grid: UDFGrid
@@ -302,14 +303,20 @@ def compute_udf_band(points_unit: np.ndarray, settings: Optional[ReconstructSett
     else:
         values = nearest.astype(np.float32)
     del owner
-    stats["gap_nodes"], stats["seconds_gap_fill"] = 0, 0.0
+    # the gaps are looked for either way: with the fill off, how many nodes it would have set
+    # tells the user whether to turn it on, whatever the radius mode
+    progress(0.9, "looking for gaps between the scan's points")
+    filling = time.perf_counter()
+    filled_indices, filled_values, gap_nodes = fill_gaps(
+        tree, points, shape, origin, spacing, indices, values,
+        origin if anchor is None else np.asarray(anchor, dtype=np.float64))
     if settings.fill_gaps:
-        progress(0.9, "looking for gaps between the scan's points")
-        filling = time.perf_counter()
-        indices, values, stats["gap_nodes"] = fill_gaps(
-            tree, points, shape, origin, spacing, indices, values,
-            origin if anchor is None else np.asarray(anchor, dtype=np.float64))
-        stats["seconds_gap_fill"] = time.perf_counter() - filling
+        indices, values = filled_indices, filled_values
+        stats["gap_nodes"], stats["open_gap_nodes"] = gap_nodes, 0
+    else:
+        stats["gap_nodes"], stats["open_gap_nodes"] = 0, gap_nodes
+    del filled_indices, filled_values
+    stats["seconds_gap_fill"] = time.perf_counter() - filling
     stats["seconds_udf"] = time.perf_counter() - started
     # the radius lattice's time, then the policy's share of the batches' time
     lattice_seconds = stats.pop("lattice_seconds", 0.0)

@@ -35,10 +35,10 @@ _FIELD_END = 0.6
 _MESH_END = 0.97
 # Below this mean number of points per ball the backbone sees too little of the surface.
 SPARSE_PATCH_POINTS = 6.0
-# From this share of the network's balls widened to find enough points, the scan has gaps wider
-# than the ball that the gap fill (off) could close: the benchmark's sparse scans reach 0.3-0.5,
-# its clean rooms (sparse far walls) 0.17, clean objects under 0.01.
-GAPPY_SHARE = 0.10
+# From this share of the band's nodes in gaps the gap fill (switched off) would have filled, the
+# scan has gaps wider than the ball: at 128 a line scan reaches 0.9, the benchmark's sparse rooms
+# 0.05-0.06, its clean rooms about 0.01, its objects under 0.01 (every radius mode).
+GAPPY_SHARE = 0.02
 
 
 @dataclass
@@ -225,12 +225,11 @@ def _reconstruct(cloud, settings: ReconstructSettings, progress, cancel,
     if udf_source == "network" and 0 < field_stats["mean_patch_points"] < SPARSE_PATCH_POINTS:
         messages.insert(0, f"the balls hold only {field_stats['mean_patch_points']:.1f} points on "
                            f"average; for a cloud this sparse, raise the radius")
-    widened = (field_stats["widened_balls"] / max(field_stats["network_queries"], 1)
-               if udf_source == "network" else 0.0)  # only the network widens balls
-    if widened >= GAPPY_SHARE and not settings.fill_gaps:
-        messages.append(f"the scan has gaps wider than the ball in places ({100 * widened:.0f} % "
-                        f"of the distance queries had to look farther for points); turn on Fill "
-                        f"Gaps (--fill-gaps) to carry flat surfaces across them")
+    open_gaps = field_stats.get("open_gap_nodes", 0) / max(field_stats["band_nodes"], 1)
+    if open_gaps >= GAPPY_SHARE:
+        messages.append(f"the scan has gaps wider than the ball in places "
+                        f"({100 * open_gaps:.0f} % of the field's nodes lie in them); turn on "
+                        f"Fill Gaps (--fill-gaps) to carry flat surfaces across them")
     if stats["faces"] == 0:
         messages.append("the mesh is empty: try a larger radius or a lower resolution")
     progress(1.0, f"done: {stats['vertices']:,} vertices, {stats['faces']:,} faces")

@@ -49,19 +49,21 @@ def reconstruct_to_file(cloud: Union[PointCloud, np.ndarray], path,
     settings = ReconstructSettings.coerce(settings)
     path = os.fspath(path)
     def write_ply(stitched, frame, colors, tree, write_progress):
-        return _write_stitched(path, stitched, frame, colors, tree, write_progress, cancel)
+        return _write_stitched(path, stitched, frame, colors, tree, write_progress, cancel,
+                               settings.radius_mode)
     write_tiled = write_ply if os.path.splitext(path)[1].lower() == ".ply" else None
 
     with core_budget(settings.workers):
         result = _reconstruct(cloud, settings, progress, cancel, udf_source, write_tiled)
     if result.mesh is not None:
-        check_result(result.mesh)
+        check_result(result.mesh, radius_mode=settings.radius_mode)
         check_cancel(cancel)
         write_mesh(path, result.mesh, cancel)
     return result
 
 
-def _write_stitched(path: str, stitched, frame, colors, tree, progress, cancel):
+def _write_stitched(path: str, stitched, frame, colors, tree, progress, cancel,
+                    radius_mode: str):
     """Write a :class:`.tiles.StitchedMesh` (working frame) to a PLY file at ``path`` block by
     block, in the input's coordinates with the nearest input point's colour; refuse it, with
     nothing written, when it is empty or only specks. Returns ``(pieces, faces of the largest
@@ -70,7 +72,8 @@ def _write_stitched(path: str, stitched, frame, colors, tree, progress, cancel):
     from .io import write_ply_in_blocks
 
     pieces = stitched.piece_sizes()
-    check_pieces(stitched.vertex_count, stitched.face_count, *pieces)  # nothing written yet
+    check_pieces(stitched.vertex_count, stitched.face_count, *pieces,  # nothing written yet
+                 radius_mode=radius_mode)
     total = stitched.vertex_count + stitched.face_count
     done = [0]
 

@@ -156,7 +156,7 @@ class ReconstructSettings:
     """
 
     radius_mode: str = setting(
-        "fixed", "Radius Mode",
+        "learned", "Radius Mode",
         "How big a neighbourhood of points is used to judge the distance to the surface at "
         "each spot",
         help="how the backbone's ball radius is chosen per query: fixed (one radius, as "

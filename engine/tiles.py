@@ -915,7 +915,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
     -------
     output : ``(vertices (n, 3) float64, faces (m, 3) int64)``, or what ``consume`` returned
     field_stats : dict, the tiles' field numbers summed (``band_nodes``, ``network_queries``,
-        ``sparse_balls``, ``widened_balls``), ``mean_patch_points`` over all, ``tiles``,
+        ``sparse_balls``, ``widened_balls``, ``open_gap_nodes``), ``mean_patch_points`` over
+        all, ``tiles``,
         ``tile_peak_bytes`` (the largest peak memory of a process that ran tiles: a worker's,
         or this process's when the tiles ran here), ``worker_processes`` (the other processes
         that made tiles; 0 when they were made here)
@@ -974,7 +975,8 @@ def mesh_in_tiles(points: np.ndarray, settings, meshing, tile_cells: int,
                 results[number] = result
                 tile_peak = max(tile_peak, result[1]["peak_bytes"])
         processes = {band["process"] for _, band in results} - {os.getpid()}
-        sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0}
+        sums = {"band_nodes": 0, "network_queries": 0, "sparse_balls": 0, "widened_balls": 0,
+                "open_gap_nodes": 0}
         patch_points = 0.0
         device = "none"
         isos = []

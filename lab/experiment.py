@@ -7,7 +7,8 @@ import numpy as np
 
 def reconstructed_test_shape(description: str, with_field: bool = False):
     """Parse ``DOMAIN [--condition] [--seed] [--resolution]`` from the command line; reconstruct
-    that test shape (clean unless told) on the CPU with the product's defaults. Returns
+    that test shape (clean unless told) on the CPU with the product's defaults but the fixed
+    radius (Table I's ``ours`` rows). Returns
     ``(truth, mesh, spacing)`` (the unit frame's grid spacing); with ``with_field``, also the
     distance grid the mesher read (:class:`engine.udf_grid.UDFGrid`) and the frame it lies in
     (the cloud's :class:`engine.frame.UnitFrame`)."""
@@ -38,7 +39,8 @@ def reconstructed_test_shape(description: str, with_field: bool = False):
     meshing.extract_surface = kept_field  # reconstruct() looks it up when it runs
     try:
         mesh = reconstruct(PointCloud(cloud.points),
-                           ReconstructSettings(resolution=args.resolution, device="cpu")).mesh
+                           ReconstructSettings(resolution=args.resolution, device="cpu",
+                                               radius_mode="fixed")).mesh
     finally:
         meshing.extract_surface = extract
     made = (truth, mesh, 1.0 / args.resolution)

@@ -11,7 +11,7 @@ zero and the fold stopped short of where it reads zero. :func:`peel_unconverged`
 behind it stays.
 
 ``python -m lab.rim_peel garments [--condition noisy] [--seed 1000000]`` (and ``cars``) prints
-what it does to a test shape at 256 with the product's defaults; docs/meshing.md has the
+what it does to a test shape at 256 with the product's defaults, fixed radius; docs/meshing.md has the
 figures. It removes most flaps and raises NC, but it opens holes where a whole region stalled
 (a car's crossings, a sparse scan) and cuts off fragments, so it is not in the mesher. Moving
 those vertices onto the zero level instead (:func:`project_unconverged`, the last line it

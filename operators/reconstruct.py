@@ -81,8 +81,9 @@ def finish_job(operator, context, job: Job) -> set:
     result = job.result
     _log(job, result)
     if len(result.mesh.faces) == 0:
-        operator.report({'ERROR'}, "No surface was found. Raise the radius or lower the "
-                                   "resolution, then try again.")
+        control = wording.radius_control(job.settings.radius_mode, job.settings.custom_range)
+        operator.report({'ERROR'}, f"No surface was found. Raise {control} or lower "
+                                   f"Resolution, then try again.")
         return {'CANCELLED'}
     for notice in wording.user_notices(result.messages, job.settings.radius_mode,
                                        job.settings.custom_range):

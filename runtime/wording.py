@@ -74,15 +74,20 @@ def _plural(count: str, noun: str) -> str:
     return noun if count == "1" else noun + "s"
 
 
+def radius_control(radius_mode: str, custom_range: bool) -> str:
+    """The panel control that makes the balls larger in this radius mode."""
+    if radius_mode == "fixed":
+        return "Radius"
+    return "Largest Radius" if custom_range else "Largest Radius (turn on Custom Range)"
+
+
 def user_notices(messages, radius_mode: str = "fixed", custom_range: bool = False) -> list:
     """The engine notes a user can act on, reworded: what happened and what to do about it.
 
     Every other note (the mesher's iso-value, cut and piece diagnostics) is for the system
     console only.
     """
-    radius = "Radius"
-    if radius_mode != "fixed":
-        radius = "Largest Radius" if custom_range else "Largest Radius (turn on Custom Range)"
+    radius = radius_control(radius_mode, custom_range)
     notices = []
     for message in messages:
         match = _OUTLIERS.search(message)

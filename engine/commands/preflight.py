@@ -94,19 +94,23 @@ many grid cells (the cloud fills its bounding box, whose longest side has >= 32 
 a cloud too sparse for the grid gives a scatter of specks of one to a few faces each."""
 
 
-def check_result(mesh, what: str = "the reconstruction") -> None:
+def check_result(mesh, what: str = "the reconstruction", radius_mode: str = "fixed") -> None:
     """Refuse an empty or near-empty result (no faces, or only specks: every piece smaller
-    than :data:`MIN_PIECE_FACES` faces); such a mesh is an error, not a file to write."""
+    than :data:`MIN_PIECE_FACES` faces); such a mesh is an error, not a file to write. The
+    advice names the flag that makes the balls larger in ``radius_mode``."""
     sizes = _piece_sizes(mesh.faces, len(mesh.vertices)) if len(mesh.faces) else [0]
-    check_pieces(len(mesh.vertices), len(mesh.faces), len(sizes), int(max(sizes)), what)
+    check_pieces(len(mesh.vertices), len(mesh.faces), len(sizes), int(max(sizes)), what,
+                 radius_mode)
 
 
 def check_pieces(vertex_count: int, face_count: int, pieces: int, largest: int,
-                 what: str = "the reconstruction") -> None:
+                 what: str = "the reconstruction", radius_mode: str = "fixed") -> None:
     """:func:`check_result` from a mesh's counts: its vertices, faces, pieces and the faces of
     its largest piece."""
+    larger = ("a larger --radius" if radius_mode == "fixed"
+              else "a larger --parent-radius (with --custom-range)")
     advice = ("so nothing was written; the cloud may be too sparse or too small for the grid: "
-              "try a larger --radius or a lower --resolution, or add points")
+              f"try {larger} or a lower --resolution, or add points")
     if face_count == 0:
         raise InputError(f"{what} found no surface ({vertex_count:,} vertices, 0 faces), "
                          f"{advice}")

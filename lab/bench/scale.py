@@ -112,7 +112,7 @@ def write_cloud(rooms: int, points: int, seed: int, path: str) -> None:
 
 def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int,
              udf_source: str = "network") -> dict:
-    """Ours as the CLI runs it: into a PLY file, tile by tile when tiled."""
+    """Ours as the CLI runs it: into a PLY file, tile by tile when tiled; fixed radius."""
     from engine.reconstruct_to_file import reconstruct_to_file
 
     cloud = np.load(folder / "cloud.npy")
@@ -120,7 +120,7 @@ def run_ours(folder: Path, voxel: float, tile_cells: int, workers: int,
     result = reconstruct_to_file(cloud, ours_path(folder, udf_source),
                                  dict(detail="voxel_size", voxel_size=voxel,
                                       tile_cells=tile_cells, workers=workers,
-                                      udf_source=udf_source))
+                                      udf_source=udf_source, radius_mode="fixed"))
     seconds = time.perf_counter() - started
     return {"seconds": seconds, "tiles": result.stats.get("tiles", 1),
             "workers": result.stats.get("workers", 1), "faces": result.stats["faces"],

@@ -164,7 +164,7 @@ def test_rerunning_replaces_the_result_instead_of_stacking_copies(quick, extensi
     material = bpy.data.materials.new("Clay")
     first.data.materials.append(material)
     meshes = len(bpy.data.meshes)
-    quick.udf_reconstruction.radius = 0.04
+    quick.udf_reconstruction.radius_mode, quick.udf_reconstruction.radius = "fixed", 0.04
     assert bpy.context.view_layer.objects.active == first  # re-run from the selected result
     assert bpy.ops.udf_reconstruction.reconstruct() == {'FINISHED'}
     assert sorted(o.name for o in bpy.data.objects) == ["Scan", "Scan_mesh"]
@@ -190,7 +190,8 @@ def test_rerunning_from_the_cloud_reuses_the_name_and_undoes_in_one_step(quick):
         bpy.data.objects["Scan_mesh"].select_set(False)
         bpy.context.view_layer.objects.active = cloud
         cloud.select_set(True)
-        bpy.context.scene.udf_reconstruction.radius = 0.04
+        props = bpy.context.scene.udf_reconstruction
+        props.radius_mode, props.radius = "fixed", 0.04
         bpy.ops.ed.undo_push(message="settings")
         assert bpy.ops.udf_reconstruction.reconstruct('EXEC_DEFAULT', True) == {'FINISHED'}
         assert sorted(o.name for o in bpy.data.objects) == ["Scan", "Scan_mesh"]
@@ -402,8 +403,8 @@ def test_notes_a_user_can_act_on_are_shown_in_plain_words(quick, extension):
              "radius",
              "kept 20 isolated points (0.25 %): too few to be outliers; set outliers to 'drop' "
              "to remove them",
-             "the scan has gaps wider than the ball in places (17 % of the distance queries had "
-             "to look farther for points); turn on Fill Gaps (--fill-gaps) to carry flat "
+             "the scan has gaps wider than the ball in places (17 % of the field's nodes lie in "
+             "them); turn on Fill Gaps (--fill-gaps) to carry flat "
              "surfaces across them"] + MESHER_JARGON
     quick.udf_reconstruction.radius_mode = "learned"
     reconstruct, job = finished_job(extension, quick, notes)

@@ -29,12 +29,13 @@ def reconstruct_fails(match: str) -> str:
 
 def test_an_empty_result_is_one_error_and_changes_nothing(scene):
     add_cloud("Ten", np.random.default_rng(1).normal(size=(10, 3)))
+    scene.udf_reconstruction.radius_mode = "fixed"  # the learned mode's large balls find one
     scene.udf_reconstruction.resolution = 32
     scene.udf_reconstruction.outliers = "keep"
     before = scene_state()
     message = reconstruct_fails("No surface was found")
     assert message.count("Error:") == 1, message
-    assert "Raise the radius or lower the resolution" in message
+    assert "Raise Radius or lower Resolution" in message
     assert scene_state() == before
 
 
@@ -95,6 +96,7 @@ def test_the_batch_reports_each_bad_file_and_saves_only_the_good_mesh(extension,
     out = tmp_path / "out"
 
     done = run_batch(scans, "--output", out, "--resolution", "32", "--outliers", "keep",
+                     "--radius-mode", "fixed",  # the learned mode finds a surface in ten points
                      "--blend", out / "all.blend")
     print(done.stdout[-3000:], done.stderr[-3000:])
     assert done.returncode == 1

@@ -31,7 +31,8 @@ def band_of(grid):
 def test_band_is_exactly_the_nodes_within_the_radius():
     points = sphere_points()
     # the gap fill would add nodes past the band where the 4000 points leave gaps
-    settings = ReconstructSettings(resolution=160, radius=0.022, fill_gaps=False)
+    settings = ReconstructSettings(radius_mode="fixed",
+                                   resolution=160, radius=0.022, fill_gaps=False)
     band = compute_udf_band(points, settings, udf_source="nearest")
     grid = band.grid
     # brute force over every node of the grid (160^3-ish nodes: cheap enough)
@@ -49,7 +50,8 @@ def test_band_is_exactly_the_nodes_within_the_radius():
 
 def test_coarse_grids_widen_the_band_to_a_few_spacings():
     points = sphere_points()
-    band = compute_udf_band(points, ReconstructSettings(resolution=32, radius=0.018),
+    band = compute_udf_band(points, ReconstructSettings(radius_mode="fixed",
+                                                        resolution=32, radius=0.018),
                             udf_source="nearest")
     spacing = band.stats["spacing"]
     assert band.stats["band_radius"] == pytest.approx(3 * spacing)
@@ -59,7 +61,7 @@ def test_coarse_grids_widen_the_band_to_a_few_spacings():
 
 def test_far_nodes_hold_at_least_the_radius():
     points = sphere_points()
-    settings = ReconstructSettings(resolution=64, radius=0.05)
+    settings = ReconstructSettings(radius_mode="fixed", resolution=64, radius=0.05)
     band = compute_udf_band(points, settings, udf_source="nearest")
     grid, radius = band.grid, band.stats["band_radius"]  # 3 spacings: the band's cap is below
     dense = np.concatenate([grid.slab(x, x + 1).reshape(-1) for x in range(grid.shape[0])])
@@ -80,7 +82,7 @@ def test_network_plumbing_scales_by_each_query_radius():
     # a predictor that reads the nearest patch point reproduces the nearest-point distance only
     # if the patches are gathered at the right radius and the output is multiplied back by it
     points = sphere_points()
-    settings = ReconstructSettings(resolution=64, radius=0.05)
+    settings = ReconstructSettings(radius_mode="fixed", resolution=64, radius=0.05)
     network = compute_udf_band(points, settings, predictor=nearest_through_patches)
     nearest = compute_udf_band(points, settings, udf_source="nearest")
     flat_n, values_n = band_of(network.grid)
@@ -119,7 +121,7 @@ def test_cancel_stops_the_field():
         calls.append(1)
         return len(calls) > 1
 
-    settings = ReconstructSettings(resolution=64, radius=0.03)
+    settings = ReconstructSettings(radius_mode="fixed", resolution=64, radius=0.03)
     with pytest.raises(Cancelled):
         compute_udf_band(sphere_points(), settings, cancel=cancel,
                          predictor=nearest_through_patches)
@@ -184,7 +186,7 @@ def test_balls_with_too_few_points_are_widened_not_left_to_the_nearest_point():
     xy = np.stack(np.meshgrid(np.arange(-0.3, 0.3001, step), np.arange(-0.3, 0.3001, step),
                               indexing="ij"), axis=-1).reshape(-1, 2)
     points = np.column_stack([xy, np.zeros(len(xy))])
-    settings = ReconstructSettings(resolution=128, radius=0.018)
+    settings = ReconstructSettings(radius_mode="fixed", resolution=128, radius=0.018)
     band = compute_udf_band(points, settings, predictor=plane_height_predictor)
     assert band.stats["widened_balls"] > 0 and band.stats["sparse_balls"] == 0
     flat, values = band_of(band.grid)
@@ -197,7 +199,8 @@ def test_balls_with_too_few_points_are_widened_not_left_to_the_nearest_point():
 
 def test_an_isolated_point_keeps_the_nearest_point_distance():
     points = np.concatenate([sphere_points(), [[0.0, 0.0, 0.0]]])  # the centre: far from all
-    band = compute_udf_band(points, ReconstructSettings(resolution=64, radius=0.03),
+    band = compute_udf_band(points, ReconstructSettings(radius_mode="fixed",
+                                                        resolution=64, radius=0.03),
                             predictor=plane_height_predictor)
     assert band.stats["sparse_balls"] > 0
     flat, values = band_of(band.grid)

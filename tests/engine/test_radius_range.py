@@ -72,10 +72,11 @@ def test_learned_radii_span_the_selectors_range_and_the_band_stays_capped():
 
 def test_a_large_fixed_radius_keeps_its_balls_but_not_its_band():
     points = _plane()
-    field = compute_udf_band(points, ReconstructSettings(resolution=128, radius=0.05),
+    field = compute_udf_band(points, ReconstructSettings(radius_mode="fixed",
+                                                         resolution=128, radius=0.05),
                              udf_source="nearest")
     assert field.stats["band_radius"] == pytest.approx(BAND_RADIUS_CAP)
-    assert max_radius(ReconstructSettings(radius=0.05)) == pytest.approx(0.05)
+    assert max_radius(ReconstructSettings(radius_mode="fixed", radius=0.05)) == pytest.approx(0.05)
 
 
 def test_the_custom_range_tooltip_names_each_modes_range():

@@ -196,7 +196,7 @@ def test_cli_writes_nothing_for_a_bad_cloud(tmp_path, capsys):
 def test_network_field_matches_or_beats_the_nearest_point_field():
     # a noisy sphere; radius 0.075 = 3 spacings, so the network sets every value the mesher
     # reads, with about 30 points per ball (inside the backbone's training range)
-    settings = ReconstructSettings(resolution=40, radius=0.075, device="cpu")
+    settings = ReconstructSettings(radius_mode="fixed", resolution=40, radius=0.075, device="cpu")
     noisy = sphere_cloud(8000) + np.random.default_rng(2).normal(scale=0.002, size=(8000, 3))
     truth = sphere_cloud(20000, seed=1)
     scores = {}

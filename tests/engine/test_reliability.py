@@ -329,10 +329,11 @@ def test_an_empty_result_is_an_error_and_writes_nothing(tmp_path):
     write_mesh(previous, Mesh(sphere(100), np.array([[0, 1, 2]])))
     before = digest(previous)
     done = engine_cli("reconstruct", tmp_path / "ten.xyz", previous, "--resolution", "32",
-                      "--outliers", "keep")
+                      "--outliers", "keep", "--radius-mode", "fixed")  # learned finds a surface
     assert done.returncode == 2, done.stderr
     assert "error: ten.xyz: the reconstruction found no surface" in done.stderr, done.stderr
     assert "nothing was written" in done.stderr and "wrote" not in done.stderr
+    assert "try a larger --radius or a lower --resolution" in done.stderr
     assert digest(previous) == before, "the previous mesh is not replaced by an empty one"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.ply", "ten.xyz"]
 
@@ -357,6 +358,8 @@ def test_specks_count_as_an_empty_result_but_a_small_surface_does_not():
         check_result(mesh)
     with pytest.raises(InputError, match=r"found no surface \(3 vertices, 0 faces\)"):
         check_result(Mesh(np.eye(3), NO_FACES))
+    with pytest.raises(InputError, match=r"try a larger --parent-radius \(with --custom-range\)"):
+        check_result(Mesh(np.eye(3), NO_FACES), radius_mode="learned")
 
 
 def test_the_batch_agrees_an_empty_result_is_a_failure(tmp_path):
@@ -364,7 +367,7 @@ def test_the_batch_agrees_an_empty_result_is_a_failure(tmp_path):
     folder.mkdir()
     _ten_points(folder / "ten.xyz")
     done = batch(folder, "--output", tmp_path / "out", "--resolution", "32",
-                 "--outliers", "keep")
+                 "--outliers", "keep", "--radius-mode", "fixed")
     assert done.returncode == 1, done.stdout + done.stderr
     assert "ten.xyz: error: the reconstruction found no surface" in done.stderr
     assert "done: 0 of 1 reconstructed" in done.stdout
