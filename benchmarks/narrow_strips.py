@@ -32,8 +32,8 @@ def main() -> None:
     centres = -HALF + pitch * (np.arange(HOLES) + 0.5)
     middles = np.stack(np.meshgrid(centres, centres), -1).reshape(-1, 2)
     rng = np.random.default_rng(0)
-    print(f"| hole radius | bars (voxels) | edge strips (voxels) | area / truth | pieces | "
-          f"boundary loops | truth > 1 voxel from the mesh: bars | edge strips |")
+    print("| hole radius | bars (voxels) | edge strips (voxels) | area / truth | pieces | "
+          "boundary loops | truth > 1 voxel from the mesh: bars | edge strips |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for radius in args.radii:
         shape = analytic.perforated_plate((0, 0, Z), HALF, HOLES, radius)
